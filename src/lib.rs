@@ -1,0 +1,1 @@
+//! visobjd: turns a lighting designer's reference images into stage lighting looks.
