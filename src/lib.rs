@@ -1,1 +1,6 @@
 //! visobjd: turns a lighting designer's reference images into stage lighting looks.
+
+pub mod color;
+pub mod dmx;
+pub mod look;
+pub mod scene;

@@ -1,0 +1,370 @@
+//! A scene folder's description (`scene.toml`): lights, groups, DMX patch and profiles.
+//!
+//! Parsing and validation live here so that `check`, the offline commands and the daemon
+//! all refuse the same broken scenes with the same messages. Basis images are loaded
+//! separately ([`crate::basis`]) because the daemon restores the stage before it reads them.
+
+use std::collections::{BTreeMap, HashMap};
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+
+use crate::dmx::profile::Profile;
+
+/// Why a scene did not load; each message names the file and the problem.
+#[derive(Debug, thiserror::Error)]
+pub enum SceneError {
+    /// The file could not be read.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// What the OS said.
+        source: std::io::Error,
+    },
+    /// TOML syntax or schema problem (the message carries line and key).
+    #[error("{path}: {message}")]
+    Parse {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong, with line and column.
+        message: String,
+    },
+    /// A semantic problem in scene.toml (duplicate channel, patch overlap, ...).
+    #[error("{path}: {message}")]
+    Invalid {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+    /// A basis image is missing, unreadable or of the wrong size.
+    #[error("{path}: {message}")]
+    Basis {
+        /// The basis image.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SceneFile {
+    name: Option<String>,
+    #[serde(default)]
+    exposure: f32,
+    #[serde(default)]
+    group: Vec<GroupFile>,
+    #[serde(default)]
+    light: Vec<LightFile>,
+    #[serde(default)]
+    profile: Vec<ProfileFile>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct GroupFile {
+    name: String,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct LightFile {
+    channel: u32,
+    name: Option<String>,
+    group: Option<String>,
+    basis: String,
+    profile: String,
+    universe: u16,
+    address: u16,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ProfileFile {
+    name: String,
+    channels: Vec<String>,
+}
+
+/// One light of the rig.
+#[derive(Debug, Clone)]
+pub struct Light {
+    /// Console channel number, unique; what OSC addresses use.
+    pub channel: u32,
+    /// Display name (defaults to "Ch N").
+    pub name: String,
+    /// Index into [`Scene::groups`]; every light belongs to exactly one group.
+    pub group: usize,
+    /// The basis image, resolved against the scene folder.
+    pub basis: PathBuf,
+    /// Index into [`Scene::profiles`].
+    pub profile: usize,
+    /// sACN universe 1..=63999.
+    pub universe: u16,
+    /// DMX start address 1..=512.
+    pub address: u16,
+}
+
+/// A light group ("system"): sampling assigns one value per group by default.
+#[derive(Debug, Clone)]
+pub struct Group {
+    /// Name as OSC addresses and the CLI use it.
+    pub name: String,
+    /// Indices into [`Scene::lights`], ascending.
+    pub lights: Vec<usize>,
+}
+
+/// A validated scene description.
+#[derive(Debug, Clone)]
+pub struct Scene {
+    /// The scene folder.
+    pub dir: PathBuf,
+    /// Human-readable name.
+    pub name: String,
+    /// Exposure of the preview in stops (optional `exposure` key, default 0).
+    pub exposure: f32,
+    /// Lights in ascending channel order; looks index them the same way.
+    pub lights: Vec<Light>,
+    /// Groups: declared groups first, then one implicit group per ungrouped light.
+    pub groups: Vec<Group>,
+    /// Profiles in use (built-in and custom).
+    pub profiles: Vec<Profile>,
+}
+
+impl Scene {
+    /// Reads and validates `DIR/scene.toml` (images are not read).
+    pub fn load(dir: &Path) -> Result<Scene, SceneError> {
+        let path = dir.join("scene.toml");
+        let text = std::fs::read_to_string(&path).map_err(|source| SceneError::Io {
+            path: path.clone(),
+            source,
+        })?;
+        Scene::parse(dir, &text)
+    }
+
+    /// Validates scene.toml text; `dir` resolves basis paths and names the file in errors.
+    pub fn parse(dir: &Path, text: &str) -> Result<Scene, SceneError> {
+        let path = dir.join("scene.toml");
+        let invalid = |message: String| SceneError::Invalid {
+            path: path.clone(),
+            message,
+        };
+        let file: SceneFile = toml::from_str(text).map_err(|e| SceneError::Parse {
+            path: path.clone(),
+            message: describe_toml_error(text, &e),
+        })?;
+        if file.light.is_empty() {
+            return Err(invalid("the scene has no [[light]]".into()));
+        }
+        if !file.exposure.is_finite() || file.exposure.abs() > 20.0 {
+            return Err(invalid(format!(
+                "exposure {} is out of range (-20..=20 stops)",
+                file.exposure
+            )));
+        }
+
+        let mut profiles: Vec<Profile> = Vec::new();
+        let mut custom: HashMap<String, Profile> = HashMap::new();
+        for p in &file.profile {
+            if Profile::built_in(&p.name).is_some() || custom.contains_key(&p.name) {
+                return Err(invalid(format!("profile `{}` is defined twice", p.name)));
+            }
+            let profile = Profile::custom(&p.name, &p.channels).map_err(invalid)?;
+            if profile.footprint() > 512 {
+                return Err(invalid(format!(
+                    "profile `{}` is wider than a universe",
+                    p.name
+                )));
+            }
+            custom.insert(p.name.clone(), profile);
+        }
+
+        let mut groups: Vec<Group> = Vec::new();
+        let mut group_index: HashMap<String, usize> = HashMap::new();
+        for g in &file.group {
+            if g.name.trim().is_empty() {
+                return Err(invalid("a [[group]] has an empty name".into()));
+            }
+            if group_index.insert(g.name.clone(), groups.len()).is_some() {
+                return Err(invalid(format!("group `{}` is declared twice", g.name)));
+            }
+            groups.push(Group {
+                name: g.name.clone(),
+                lights: Vec::new(),
+            });
+        }
+
+        let mut raw = file.light;
+        raw.sort_by_key(|l| l.channel);
+        let mut lights = Vec::with_capacity(raw.len());
+        let mut slots: BTreeMap<(u16, u16), u32> = BTreeMap::new();
+        for (i, l) in raw.iter().enumerate() {
+            if l.channel == 0 {
+                return Err(invalid("light channel 0: channels start at 1".into()));
+            }
+            if i > 0 && raw[i - 1].channel == l.channel {
+                return Err(invalid(format!(
+                    "channel {} is used by two lights",
+                    l.channel
+                )));
+            }
+            let profile = match profiles.iter().position(|p| p.name == l.profile) {
+                Some(p) => p,
+                None => {
+                    let p = custom
+                        .get(&l.profile)
+                        .cloned()
+                        .or_else(|| Profile::built_in(&l.profile))
+                        .ok_or_else(|| {
+                            invalid(format!(
+                                "light {}: unknown profile `{}` (built in: {}; or define it in a [[profile]])",
+                                l.channel,
+                                l.profile,
+                                Profile::built_in_names().collect::<Vec<_>>().join(", ")
+                            ))
+                        })?;
+                    profiles.push(p);
+                    profiles.len() - 1
+                }
+            };
+            if !(1..=63999).contains(&l.universe) {
+                return Err(invalid(format!(
+                    "light {}: universe {} is out of range (1-63999)",
+                    l.channel, l.universe
+                )));
+            }
+            let width = profiles[profile].footprint() as u32;
+            let last = u32::from(l.address) + width - 1;
+            if l.address == 0 || last > 512 {
+                return Err(invalid(format!(
+                    "light {}: address {} with a {}-slot `{}` footprint does not fit in slots 1-512",
+                    l.channel, l.address, width, l.profile
+                )));
+            }
+            for slot in u32::from(l.address)..=last {
+                if let Some(other) = slots.insert((l.universe, slot as u16), l.channel) {
+                    return Err(invalid(format!(
+                        "lights {} and {} both use universe {} slot {}",
+                        other, l.channel, l.universe, slot
+                    )));
+                }
+            }
+            let group = match &l.group {
+                Some(name) => *group_index.get(name).ok_or_else(|| {
+                    invalid(format!(
+                        "light {}: group `{}` is not declared with [[group]]",
+                        l.channel, name
+                    ))
+                })?,
+                None => {
+                    let name = format!("ch{}", l.channel);
+                    if group_index.contains_key(&name) {
+                        return Err(invalid(format!(
+                            "light {} has no group and its implicit group name `{name}` is taken",
+                            l.channel
+                        )));
+                    }
+                    group_index.insert(name.clone(), groups.len());
+                    groups.push(Group {
+                        name,
+                        lights: Vec::new(),
+                    });
+                    groups.len() - 1
+                }
+            };
+            let basis = safe_relative(&l.basis).ok_or_else(|| {
+                invalid(format!(
+                    "light {}: basis `{}` must be a relative path inside the scene folder",
+                    l.channel, l.basis
+                ))
+            })?;
+            groups[group].lights.push(i);
+            lights.push(Light {
+                channel: l.channel,
+                name: l
+                    .name
+                    .clone()
+                    .unwrap_or_else(|| format!("Ch {}", l.channel)),
+                group,
+                basis: dir.join(basis),
+                profile,
+                universe: l.universe,
+                address: l.address,
+            });
+        }
+        // A declared group no light uses would be an empty sampling unit: drop it.
+        groups.retain(|g| !g.lights.is_empty());
+        let mut remap = vec![usize::MAX; group_index.len()];
+        for (new, g) in groups.iter().enumerate() {
+            remap[lights[g.lights[0]].group] = new;
+        }
+        for l in &mut lights {
+            l.group = remap[l.group];
+        }
+
+        Ok(Scene {
+            dir: dir.to_path_buf(),
+            name: file.name.unwrap_or_else(|| dir.display().to_string()),
+            exposure: file.exposure,
+            lights,
+            groups,
+            profiles,
+        })
+    }
+
+    /// The light with console channel `channel`.
+    pub fn light_index(&self, channel: u32) -> Option<usize> {
+        self.lights
+            .binary_search_by_key(&channel, |l| l.channel)
+            .ok()
+    }
+
+    /// The group called `name` (exact match first, then case-insensitive, as OSC does).
+    pub fn group_index(&self, name: &str) -> Option<usize> {
+        self.groups.iter().position(|g| g.name == name).or_else(|| {
+            self.groups
+                .iter()
+                .position(|g| g.name.eq_ignore_ascii_case(name))
+        })
+    }
+
+    /// The profile of light `i`.
+    pub fn profile(&self, light: usize) -> &Profile {
+        &self.profiles[self.lights[light].profile]
+    }
+
+    /// A short description of the channel range, for "light 99 is not in the scene" errors.
+    pub fn channel_range(&self) -> String {
+        match (self.lights.first(), self.lights.last()) {
+            (Some(a), Some(b)) => format!("channels {}-{}", a.channel, b.channel),
+            _ => "no channels".into(),
+        }
+    }
+}
+
+/// `p` as a path that cannot leave its folder (no root, no `..`), or None.
+pub fn safe_relative(p: &str) -> Option<&Path> {
+    use std::path::Component;
+    let path = Path::new(p);
+    let ok = !p.is_empty()
+        && path
+            .components()
+            .all(|c| matches!(c, Component::Normal(_) | Component::CurDir));
+    ok.then_some(path)
+}
+
+/// A TOML error on one line ("line 3, column 7: unknown field `colr`, expected ..."),
+/// so config and scene errors point a person at the spot to fix.
+pub fn describe_toml_error(text: &str, e: &toml::de::Error) -> String {
+    let msg = e.message().trim().replace('\n', " ");
+    match e.span() {
+        Some(span) => {
+            let before = &text[..span.start.min(text.len())];
+            let line = before.matches('\n').count() + 1;
+            let column = before.len() - before.rfind('\n').map_or(0, |i| i + 1) + 1;
+            format!("line {line}, column {column}: {msg}")
+        }
+        None => msg,
+    }
+}
