@@ -1,6 +1,15 @@
 //! visobjd: turns a lighting designer's reference images into stage lighting looks.
 
+pub mod basis;
+pub mod cli;
 pub mod color;
 pub mod dmx;
+pub mod gallery;
 pub mod look;
+pub mod objective;
+pub mod render;
+pub mod sampler;
 pub mod scene;
+pub mod sheet;
+pub mod stage;
+pub mod targeting;

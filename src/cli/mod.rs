@@ -1,0 +1,47 @@
+//! The command line (cli.md): argument parsing and one module per subcommand.
+
+mod gallery;
+mod render;
+
+use clap::{ArgMatches, CommandFactory, FromArgMatches, Parser, Subcommand};
+
+/// visobjd: reference images in, stage lighting looks out.
+#[derive(Parser)]
+#[command(version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Offline: one generate from reference images, written as a contact sheet (and JSON).
+    Gallery(gallery::Args),
+    /// Renders one look file to a PNG.
+    Render(render::Args),
+}
+
+/// Runs the command line; returns the process exit code. User mistakes print one line on
+/// stderr and exit non-zero, never a panic.
+pub fn main() -> std::process::ExitCode {
+    let matches = Cli::command().get_matches();
+    let cli = match Cli::from_arg_matches(&matches) {
+        Ok(cli) => cli,
+        Err(e) => e.exit(),
+    };
+    let sub: &ArgMatches = matches
+        .subcommand()
+        .map(|(_, m)| m)
+        .expect("clap requires a subcommand");
+    let result = match cli.command {
+        Command::Gallery(args) => gallery::run(args, sub),
+        Command::Render(args) => render::run(args),
+    };
+    match result {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {}", format!("{e:#}").replace('\n', " "));
+            std::process::ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,385 @@
+//! Visual objectives: what a reference image asks of the stage (paper 4.2.1 and 4.3).
+//!
+//! An objective is the image's intensity model (mean L*, key L*, fraction of bright pixels)
+//! and/or its colour palette, aimed at a region of the stage. Analysis is pure; only
+//! [`decode_reference`] touches the file system.
+
+use std::path::Path;
+
+use rand::{Rng, RngExt, SeedableRng};
+
+use crate::color::{delta_e, linear_to_lab, linear_to_srgb, srgb8_to_linear_table};
+
+/// Longest side the reference is reduced to before statistics (algorithm.md).
+pub const ANALYSIS_SIDE: u32 = 256;
+/// Largest reference accepted, in pixels (osc.md: images over 64 megapixels are refused).
+pub const MAX_REFERENCE_PIXELS: u64 = 64_000_000;
+/// Fraction of the brightest pixels assumed lit by key lights (paper 4.2.1).
+pub const KEY_FRACTION: f64 = 0.15;
+
+/// Which aspects of the reference an objective takes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Aspects {
+    /// Mean and key intensity only.
+    Intensity,
+    /// Palette only.
+    Color,
+    /// Both.
+    Both,
+}
+
+impl Aspects {
+    /// Parses `intensity`, `color` (or `colour`) or `both`, case-insensitively.
+    pub fn parse(s: &str) -> Result<Aspects, String> {
+        match s.to_ascii_lowercase().as_str() {
+            "intensity" => Ok(Aspects::Intensity),
+            "color" | "colour" => Ok(Aspects::Color),
+            "both" => Ok(Aspects::Both),
+            _ => Err(format!(
+                "aspects `{s}` is not one of intensity, color, both"
+            )),
+        }
+    }
+
+    /// The name used on the wire and in files.
+    pub fn name(self) -> &'static str {
+        match self {
+            Aspects::Intensity => "intensity",
+            Aspects::Color => "color",
+            Aspects::Both => "both",
+        }
+    }
+
+    /// Whether intensity is taken.
+    pub fn intensity(self) -> bool {
+        self != Aspects::Color
+    }
+
+    /// Whether colour is taken.
+    pub fn color(self) -> bool {
+        self != Aspects::Intensity
+    }
+}
+
+/// A rectangle in normalised image coordinates (0..1, y down).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Region {
+    /// Left.
+    pub x0: f32,
+    /// Top.
+    pub y0: f32,
+    /// Right (exclusive).
+    pub x1: f32,
+    /// Bottom (exclusive).
+    pub y1: f32,
+}
+
+impl Region {
+    /// The whole stage.
+    pub const FULL: Region = Region {
+        x0: 0.0,
+        y0: 0.0,
+        x1: 1.0,
+        y1: 1.0,
+    };
+
+    /// A validated region: finite, inside 0..1, with x0 < x1 and y0 < y1.
+    pub fn new(x0: f32, y0: f32, x1: f32, y1: f32) -> Result<Region, String> {
+        let all = [x0, y0, x1, y1];
+        if all
+            .iter()
+            .any(|v| !v.is_finite() || !(0.0..=1.0).contains(v))
+        {
+            return Err(format!(
+                "region {x0},{y0},{x1},{y1} must have every coordinate in 0..1"
+            ));
+        }
+        if x0 >= x1 || y0 >= y1 {
+            return Err(format!(
+                "region {x0},{y0},{x1},{y1} is empty: it needs x0 < x1 and y0 < y1"
+            ));
+        }
+        Ok(Region { x0, y0, x1, y1 })
+    }
+
+    /// Parses `X0,Y0,X1,Y1`.
+    pub fn parse(s: &str) -> Result<Region, String> {
+        let v: Vec<f32> = s
+            .split(',')
+            .map(|p| p.trim().parse::<f32>())
+            .collect::<Result<_, _>>()
+            .map_err(|_| format!("region `{s}` is not four numbers X0,Y0,X1,Y1"))?;
+        match v[..] {
+            [x0, y0, x1, y1] => Region::new(x0, y0, x1, y1),
+            _ => Err(format!("region `{s}` is not four numbers X0,Y0,X1,Y1")),
+        }
+    }
+
+    /// Fraction of the image it covers.
+    pub fn area(&self) -> f32 {
+        (self.x1 - self.x0) * (self.y1 - self.y0)
+    }
+
+    /// Whether it is the whole image.
+    pub fn is_full(&self) -> bool {
+        *self == Region::FULL
+    }
+
+    /// Whether pixel (x, y) of a `w x h` grid has its centre inside.
+    pub fn contains_pixel(&self, x: usize, y: usize, w: usize, h: usize) -> bool {
+        let cx = (x as f32 + 0.5) / w as f32;
+        let cy = (y as f32 + 0.5) / h as f32;
+        cx >= self.x0 && cx < self.x1 && cy >= self.y0 && cy < self.y1
+    }
+
+    /// The pixel rectangle `[x0, x1) x [y0, y1)` it covers on a `w x h` grid (at least 1x1).
+    fn pixel_bounds(&self, w: u32, h: u32) -> (u32, u32, u32, u32) {
+        let px = |v: f32, n: u32| ((v * n as f32).round() as u32).min(n);
+        let (x0, x1) = (px(self.x0, w), px(self.x1, w));
+        let (y0, y1) = (px(self.y0, h), px(self.y1, h));
+        let x0 = x0.min(w.saturating_sub(1));
+        let y0 = y0.min(h.saturating_sub(1));
+        (x0, y0, x1.max(x0 + 1), y1.max(y0 + 1))
+    }
+}
+
+/// The intensity model of a reference (paper 4.2.1), L* as 0..100.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct IntensityStats {
+    /// Mean L* (mu_a x 100).
+    pub mean_l: f32,
+    /// Mean L* of the brightest 15% of pixels (mu_k x 100).
+    pub key_l: f32,
+    /// Fraction of pixels strictly brighter than the mean (b).
+    pub bright: f32,
+}
+
+/// One palette colour: sRGB 0..1 and the fraction of the image nearest to it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PaletteColor {
+    /// sRGB 0..1 (the cluster's mean colour).
+    pub color: [f32; 3],
+    /// Share of pixels; a palette's weights sum to 1.
+    pub weight: f32,
+}
+
+/// A reference image reduced to what the sampler needs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Analysis {
+    /// Intensity model.
+    pub stats: IntensityStats,
+    /// Palette, heaviest colour first.
+    pub palette: Vec<PaletteColor>,
+}
+
+/// A visual objective: a reference image's analysis, which aspects to take, and where.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Objective {
+    /// The reference's file name, as the user gave it.
+    pub image: String,
+    /// Aspects taken.
+    pub aspects: Aspects,
+    /// Stage region aimed at.
+    pub region: Region,
+    /// The reference's statistics and palette.
+    pub analysis: Analysis,
+}
+
+/// Decodes a reference image (PNG, JPEG) to 8-bit sRGB, refusing non-images and images
+/// over [`MAX_REFERENCE_PIXELS`] before allocating them.
+pub fn decode_reference(path: &Path) -> Result<image::RgbImage, String> {
+    let reader = image::ImageReader::open(path)
+        .map_err(|e| format!("cannot open it: {e}"))?
+        .with_guessed_format()
+        .map_err(|e| format!("cannot read it: {e}"))?;
+    if reader.format().is_none() {
+        return Err("is not an image (PNG or JPEG expected)".into());
+    }
+    let (w, h) = reader
+        .into_dimensions()
+        .map_err(|e| format!("is not a readable image: {e}"))?;
+    if u64::from(w) * u64::from(h) > MAX_REFERENCE_PIXELS {
+        return Err(format!(
+            "is {w}x{h}, over the {} megapixel limit",
+            MAX_REFERENCE_PIXELS / 1_000_000
+        ));
+    }
+    if w == 0 || h == 0 {
+        return Err("has no pixels".into());
+    }
+    let mut reader = image::ImageReader::open(path)
+        .map_err(|e| format!("cannot open it: {e}"))?
+        .with_guessed_format()
+        .map_err(|e| format!("cannot read it: {e}"))?;
+    let mut limits = image::Limits::default();
+    limits.max_image_width = Some(w);
+    limits.max_image_height = Some(h);
+    limits.max_alloc = Some(MAX_REFERENCE_PIXELS * 16);
+    reader.limits(limits);
+    let img = std::panic::catch_unwind(move || reader.decode())
+        .map_err(|_| "is corrupt (the decoder gave up)".to_string())?
+        .map_err(|e| format!("is not a readable image: {e}"))?;
+    Ok(img.to_rgb8())
+}
+
+/// Crops to `crop`, then shrinks so the longest side is at most [`ANALYSIS_SIDE`], and
+/// returns the pixels in linear RGB.
+fn analysis_pixels(img: &image::RgbImage, crop: Region) -> Vec<[f32; 3]> {
+    let (x0, y0, x1, y1) = crop.pixel_bounds(img.width(), img.height());
+    let view = image::imageops::crop_imm(img, x0, y0, x1 - x0, y1 - y0).to_image();
+    let (w, h) = view.dimensions();
+    let small = if w.max(h) > ANALYSIS_SIDE {
+        let scale = f64::from(ANALYSIS_SIDE) / f64::from(w.max(h));
+        let nw = ((f64::from(w) * scale).round() as u32).max(1);
+        let nh = ((f64::from(h) * scale).round() as u32).max(1);
+        image::imageops::resize(&view, nw, nh, image::imageops::FilterType::Triangle)
+    } else {
+        view
+    };
+    let lut = srgb8_to_linear_table();
+    small
+        .pixels()
+        .map(|p| [lut[p[0] as usize], lut[p[1] as usize], lut[p[2] as usize]])
+        .collect()
+}
+
+/// Analyses a decoded reference: intensity statistics and a `palette_size`-colour palette.
+///
+/// The palette's k-means is seeded from the pixels themselves, so the same image always
+/// gives the same palette.
+pub fn analyze(img: &image::RgbImage, crop: Region, palette_size: usize) -> Analysis {
+    let pixels = analysis_pixels(img, crop);
+    let labs: Vec<[f32; 3]> = pixels.iter().map(|&p| linear_to_lab(p)).collect();
+    let lightness: Vec<f32> = labs.iter().map(|l| l[0]).collect();
+    Analysis {
+        stats: intensity_stats(&lightness),
+        palette: palette(&pixels, &labs, palette_size),
+    }
+}
+
+/// Mean L*, key L* (exact mean of the top 15%) and the fraction above the mean.
+pub fn intensity_stats(lightness: &[f32]) -> IntensityStats {
+    let n = lightness.len().max(1);
+    let mean = lightness.iter().map(|&v| f64::from(v)).sum::<f64>() / n as f64;
+    let k = ((KEY_FRACTION * lightness.len() as f64).round() as usize).clamp(1, n);
+    let mut sorted = lightness.to_vec();
+    let key = if sorted.is_empty() {
+        0.0
+    } else {
+        // Everything after position n - k is at least as bright: the exact top k.
+        sorted.select_nth_unstable_by(n - k, |a, b| a.total_cmp(b));
+        sorted[n - k..].iter().map(|&v| f64::from(v)).sum::<f64>() / k as f64
+    };
+    let bright = lightness
+        .iter()
+        .filter(|&&v| f64::from(v) > mean + 1e-4)
+        .count() as f64
+        / n as f64;
+    IntensityStats {
+        mean_l: mean as f32,
+        key_l: key as f32,
+        bright: bright as f32,
+    }
+}
+
+/// Largest number of k-means iterations; palettes settle well before.
+const KMEANS_ITERATIONS: usize = 30;
+
+/// K-means in CIELAB with k-means++ seeding; colours are the members' mean linear RGB,
+/// sRGB-encoded; weights the share of pixels nearest each centre.
+fn palette(pixels: &[[f32; 3]], labs: &[[f32; 3]], k: usize) -> Vec<PaletteColor> {
+    if labs.is_empty() || k == 0 {
+        return Vec::new();
+    }
+    // The seed depends only on the pixels, so one image always gives one palette.
+    let seed = labs.iter().fold(0xcbf2_9ce4_8422_2325u64, |h, l| {
+        (h ^ u64::from(l[0].to_bits())).wrapping_mul(0x100_0000_01b3)
+    });
+    let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(seed);
+    let mut centres = kmeans_pp(labs, k, &mut rng);
+    let mut assign = vec![0usize; labs.len()];
+    for _ in 0..KMEANS_ITERATIONS {
+        let mut changed = false;
+        for (a, l) in assign.iter_mut().zip(labs) {
+            let best = nearest(&centres, *l);
+            changed |= *a != best;
+            *a = best;
+        }
+        let mut sums = vec![[0.0f64; 4]; centres.len()];
+        for (a, l) in assign.iter().zip(labs) {
+            for c in 0..3 {
+                sums[*a][c] += f64::from(l[c]);
+            }
+            sums[*a][3] += 1.0;
+        }
+        for (centre, s) in centres.iter_mut().zip(&sums) {
+            if s[3] > 0.0 {
+                *centre = [0, 1, 2].map(|c| (s[c] / s[3]) as f32);
+            }
+        }
+        if !changed {
+            break;
+        }
+    }
+    let mut sums = vec![[0.0f64; 4]; centres.len()];
+    for (a, p) in assign.iter().zip(pixels) {
+        for c in 0..3 {
+            sums[*a][c] += f64::from(p[c]);
+        }
+        sums[*a][3] += 1.0;
+    }
+    let total = labs.len() as f64;
+    let mut out: Vec<PaletteColor> = sums
+        .iter()
+        .filter(|s| s[3] > 0.0)
+        .map(|s| PaletteColor {
+            color: [0, 1, 2].map(|c| linear_to_srgb((s[c] / s[3]) as f32)),
+            weight: (s[3] / total) as f32,
+        })
+        .collect();
+    out.sort_by(|a, b| b.weight.total_cmp(&a.weight));
+    out
+}
+
+/// k-means++ seeding; stops early when every pixel coincides with a centre (an image with
+/// fewer distinct colours than `k` gets fewer palette colours).
+fn kmeans_pp(labs: &[[f32; 3]], k: usize, rng: &mut impl Rng) -> Vec<[f32; 3]> {
+    let mut centres = vec![labs[rng.random_range(0..labs.len())]];
+    let mut d2: Vec<f64> = labs
+        .iter()
+        .map(|l| f64::from(delta_e(*l, centres[0])).powi(2))
+        .collect();
+    while centres.len() < k {
+        let total: f64 = d2.iter().sum();
+        if total <= 1e-9 {
+            break;
+        }
+        let mut target = rng.random::<f64>() * total;
+        let mut pick = d2.len() - 1;
+        for (i, &d) in d2.iter().enumerate() {
+            if target < d {
+                pick = i;
+                break;
+            }
+            target -= d;
+        }
+        let c = labs[pick];
+        centres.push(c);
+        for (d, l) in d2.iter_mut().zip(labs) {
+            *d = d.min(f64::from(delta_e(*l, c)).powi(2));
+        }
+    }
+    centres
+}
+
+/// Index of the centre nearest to `lab`.
+pub fn nearest(centres: &[[f32; 3]], lab: [f32; 3]) -> usize {
+    let mut best = (0, f32::INFINITY);
+    for (i, c) in centres.iter().enumerate() {
+        let d = delta_e(*c, lab);
+        if d < best.1 {
+            best = (i, d);
+        }
+    }
+    best.0
+}

@@ -1,0 +1,452 @@
+//! Candidate looks from objectives: the paper's sequential key/fill sampler (4.2), colour
+//! assignment by weight (4.3), and its refinements (4.4): groups, regions, keys, locks.
+//!
+//! Pure: plain data in, a [`Look`] out, randomness only from the caller's generator, so a
+//! seed reproduces a gallery. A [`Plan`] does the per-generate work once (which lights
+//! each objective reaches, normalisation factors, locked sums); [`Plan::sample`] is then
+//! cheap enough to call thousands of times.
+
+use rand::Rng;
+use rand::seq::SliceRandom;
+use rand_distr::{Distribution, Normal};
+
+use crate::color::{linear_to_srgb, srgb_to_lab, srgb_to_linear};
+use crate::look::Look;
+use crate::objective::{Aspects, PaletteColor, nearest};
+
+/// The rig as the sampler sees it.
+#[derive(Debug, Clone)]
+pub struct Rig {
+    /// Light indices per group.
+    pub groups: Vec<Vec<usize>>,
+    /// Per light: whether its profile can change colour.
+    pub colored: Vec<bool>,
+}
+
+impl Rig {
+    /// The sampler's view of a scene.
+    pub fn new(scene: &crate::scene::Scene) -> Rig {
+        Rig {
+            groups: scene.groups.iter().map(|g| g.lights.clone()).collect(),
+            colored: (0..scene.lights.len())
+                .map(|l| scene.profile(l).has_colour())
+                .collect(),
+        }
+    }
+
+    fn group_of(&self) -> Vec<usize> {
+        let mut of = vec![0; self.colored.len()];
+        for (g, lights) in self.groups.iter().enumerate() {
+            for &l in lights {
+                of[l] = g;
+            }
+        }
+        of
+    }
+}
+
+/// The designer's partial specification (paper 4.4.3).
+#[derive(Debug, Clone, Default)]
+pub struct Constraints {
+    /// Per light: keeps its base value exactly (locked lights and lights of locked groups).
+    pub locked: Vec<bool>,
+    /// Per group: designated key group. If any is set, these are the keys.
+    pub keys: Vec<bool>,
+    /// Sample each light on its own instead of one value per group.
+    pub per_light: bool,
+}
+
+impl Constraints {
+    /// No locks, no designated keys, group granularity.
+    pub fn none(rig: &Rig) -> Constraints {
+        Constraints {
+            locked: vec![false; rig.colored.len()],
+            keys: vec![false; rig.groups.len()],
+            per_light: false,
+        }
+    }
+}
+
+/// An objective prepared for the stage: what it asks and which lights it reaches.
+#[derive(Debug, Clone)]
+pub struct Target {
+    /// Aspects taken.
+    pub aspects: Aspects,
+    /// Area of its region (0..1): larger regions run first, so smaller ones win.
+    pub area: f32,
+    /// Per light: selected by the region.
+    pub selected: Vec<bool>,
+    /// Per light: mean luminance added in the region per unit of intensity.
+    pub sensitivity: Vec<f32>,
+    /// mu_a, 0..1.
+    pub mean: f32,
+    /// mu_k, 0..1.
+    pub key: f32,
+    /// b: fraction of reference pixels brighter than the mean.
+    pub bright: f32,
+    /// Palette (colours sRGB, weights summing to 1).
+    pub palette: Vec<PaletteColor>,
+}
+
+/// Spreads of the key and fill draws (fractions of full).
+#[derive(Debug, Clone, Copy)]
+pub struct Spread {
+    /// sigma_k (paper: 5%, the just-noticeable difference).
+    pub key: f32,
+    /// sigma_a (paper: 10%).
+    pub fill: f32,
+}
+
+impl Default for Spread {
+    fn default() -> Spread {
+        Spread {
+            key: 0.05,
+            fill: 0.10,
+        }
+    }
+}
+
+/// One sampling unit: the unlocked lights of a group (or one light) that an objective
+/// reaches; they all take the same value.
+#[derive(Debug, Clone)]
+struct Unit {
+    lights: Vec<usize>,
+    /// Brightness normalisation factor (4.2.5).
+    factor: f32,
+    /// Belongs to a designated key group.
+    designated: bool,
+}
+
+#[derive(Debug, Clone)]
+struct IntensityStep {
+    units: Vec<Unit>,
+    /// Fully locked units count as already set (their base values).
+    locked_units: usize,
+    locked_sum: f32,
+    designated_keys: bool,
+    mean: f32,
+    key: f32,
+    bright: f32,
+}
+
+#[derive(Debug, Clone)]
+struct ColorStep {
+    /// Per unit, its unlocked colour-capable lights.
+    units: Vec<Vec<usize>>,
+    /// Locked colour-capable lights the objective reaches: they count toward the
+    /// nearest palette colour's share.
+    locked: Vec<usize>,
+    /// Palette colours at full value (hue and saturation only), their weights and Lab.
+    colors: Vec<([f32; 3], f32, [f32; 3])>,
+}
+
+/// The per-generate preparation of objectives against a rig, constraints and base look.
+#[derive(Debug, Clone)]
+pub struct Plan {
+    intensity: Vec<IntensityStep>,
+    color: Vec<ColorStep>,
+    spread: Spread,
+}
+
+impl Plan {
+    /// Prepares the objectives: intensity aspects first, then colour; within each, larger
+    /// regions first so that a region inside another wins the lights both select.
+    pub fn new(
+        rig: &Rig,
+        constraints: &Constraints,
+        targets: &[Target],
+        base: &Look,
+        spread: Spread,
+    ) -> Plan {
+        let mut order: Vec<&Target> = targets.iter().collect();
+        order.sort_by(|a, b| b.area.total_cmp(&a.area));
+        let group_of = rig.group_of();
+        let mut intensity = Vec::new();
+        let mut color = Vec::new();
+        for t in order {
+            let units = units(rig, constraints, t);
+            if t.aspects.intensity() {
+                intensity.push(intensity_step(constraints, &group_of, t, &units, base));
+            }
+            if t.aspects.color() && !t.palette.is_empty() {
+                color.push(color_step(rig, constraints, t, &units));
+            }
+        }
+        Plan {
+            intensity,
+            color,
+            spread,
+        }
+    }
+
+    /// One candidate: the base look with every reached, unlocked light resampled.
+    pub fn sample(&self, base: &Look, rng: &mut impl Rng) -> Look {
+        let mut look = base.clone();
+        for step in &self.intensity {
+            let keys = if step.designated_keys {
+                Keys::Designated(step.units.iter().map(|u| u.designated).collect())
+            } else {
+                Keys::Count(key_count(step.bright, step.units.len()))
+            };
+            let values = gibbs(
+                step.units.len(),
+                step.locked_units,
+                step.locked_sum,
+                &keys,
+                step.mean,
+                step.key,
+                self.spread,
+                rng,
+            );
+            for (unit, x) in step.units.iter().zip(values) {
+                let v = (x * unit.factor).min(1.0);
+                for &l in &unit.lights {
+                    look.levels[l].intensity = v;
+                }
+            }
+        }
+        for step in &self.color {
+            assign_colors(step, &mut look, rng);
+        }
+        look
+    }
+}
+
+/// Number of keys over `units` sampled units: round(b L / 2) (paper 4.2.4).
+pub fn key_count(bright: f32, units: usize) -> usize {
+    ((bright * units as f32 / 2.0).round() as usize).min(units)
+}
+
+fn units(rig: &Rig, constraints: &Constraints, t: &Target) -> Vec<Vec<usize>> {
+    let selected = |l: &usize| t.selected[*l];
+    if constraints.per_light {
+        (0..rig.colored.len())
+            .filter(selected)
+            .map(|l| vec![l])
+            .collect()
+    } else {
+        rig.groups
+            .iter()
+            .map(|g| g.iter().copied().filter(selected).collect::<Vec<_>>())
+            .filter(|u| !u.is_empty())
+            .collect()
+    }
+}
+
+fn intensity_step(
+    constraints: &Constraints,
+    group_of: &[usize],
+    t: &Target,
+    all_units: &[Vec<usize>],
+    base: &Look,
+) -> IntensityStep {
+    let mut units = Vec::new();
+    let (mut locked_units, mut locked_sum) = (0, 0.0);
+    for members in all_units {
+        let free: Vec<usize> = members
+            .iter()
+            .copied()
+            .filter(|&l| !constraints.locked[l])
+            .collect();
+        if free.is_empty() {
+            locked_units += 1;
+            locked_sum += members
+                .iter()
+                .map(|&l| base.levels[l].intensity)
+                .sum::<f32>()
+                / members.len() as f32;
+        } else {
+            let designated = constraints.keys[group_of[free[0]]];
+            units.push(Unit {
+                lights: free,
+                factor: 1.0,
+                designated,
+            });
+        }
+    }
+    // Brightness normalisation: 1/s rescaled to mean 1 over the units that light the
+    // region; units that do not light it keep factor 1.
+    let s: Vec<f32> = units
+        .iter()
+        .map(|u| u.lights.iter().map(|&l| t.sensitivity[l]).sum())
+        .collect();
+    let inv: Vec<f32> = s.iter().filter(|&&v| v > 0.0).map(|v| 1.0 / v).collect();
+    if !inv.is_empty() {
+        let mean_inv = inv.iter().sum::<f32>() / inv.len() as f32;
+        for (u, &sv) in units.iter_mut().zip(&s) {
+            if sv > 0.0 {
+                u.factor = (1.0 / sv) / mean_inv;
+            }
+        }
+    }
+    IntensityStep {
+        designated_keys: constraints.keys.iter().any(|&k| k),
+        units,
+        locked_units,
+        locked_sum,
+        mean: t.mean,
+        key: t.key,
+        bright: t.bright,
+    }
+}
+
+fn color_step(
+    rig: &Rig,
+    constraints: &Constraints,
+    t: &Target,
+    all_units: &[Vec<usize>],
+) -> ColorStep {
+    let free = |l: &usize| rig.colored[*l] && !constraints.locked[*l];
+    let units = all_units
+        .iter()
+        .map(|u| u.iter().copied().filter(free).collect::<Vec<_>>())
+        .filter(|u| !u.is_empty())
+        .collect();
+    let locked = (0..rig.colored.len())
+        .filter(|&l| t.selected[l] && rig.colored[l] && constraints.locked[l])
+        .collect();
+    let colors = t
+        .palette
+        .iter()
+        .map(|p| {
+            let c = full_value(p.color);
+            (c, p.weight, srgb_to_lab(c))
+        })
+        .collect();
+    ColorStep {
+        units,
+        locked,
+        colors,
+    }
+}
+
+/// A palette colour's hue and saturation at full value: the light's brightness comes from
+/// its intensity (algorithm.md). Black has no hue and becomes white.
+pub fn full_value(srgb: [f32; 3]) -> [f32; 3] {
+    let lin = srgb.map(srgb_to_linear);
+    let max = lin[0].max(lin[1]).max(lin[2]);
+    if max <= 1e-6 {
+        return [1.0, 1.0, 1.0];
+    }
+    lin.map(|v| linear_to_srgb(v / max))
+}
+
+/// How the keys of a pass are chosen.
+#[derive(Debug, Clone)]
+pub enum Keys {
+    /// This many, chosen uniformly at random.
+    Count(usize),
+    /// Exactly these units (designer-chosen key groups).
+    Designated(Vec<bool>),
+}
+
+/// The sequential key/fill pass over `n` free units (paper 4.2.2, equation 4).
+///
+/// `locked_units` units already hold values summing to `locked_sum`; they count as set.
+/// Keys are drawn from N(key, sigma_k); then each fill, in random order, from
+/// N(mu_j, sigma_a) with mu_j = (L mu_a - sum so far) / (units still unset). Every draw is
+/// clamped to 0..1. Returns one value per free unit.
+#[allow(clippy::too_many_arguments)]
+pub fn gibbs(
+    n: usize,
+    locked_units: usize,
+    locked_sum: f32,
+    keys: &Keys,
+    mean: f32,
+    key: f32,
+    spread: Spread,
+    rng: &mut impl Rng,
+) -> Vec<f32> {
+    let mut values = vec![0.0f32; n];
+    let mut order: Vec<usize> = (0..n).collect();
+    let key_units: Vec<usize> = match keys {
+        Keys::Count(k) => {
+            order.shuffle(rng);
+            order[..(*k).min(n)].to_vec()
+        }
+        Keys::Designated(flags) => {
+            let ks: Vec<usize> = (0..n).filter(|&i| flags[i]).collect();
+            order.retain(|i| !flags[*i]);
+            order.shuffle(rng);
+            let mut all = ks.clone();
+            all.extend_from_slice(&order);
+            order = all;
+            ks
+        }
+    };
+    let total = (n + locked_units) as f32;
+    let mut sum = locked_sum;
+    let mut set = locked_units;
+    for &u in &key_units {
+        let x = draw(key, spread.key, rng);
+        values[u] = x;
+        sum += x;
+        set += 1;
+    }
+    for &u in &order[key_units.len()..] {
+        let mu = (total * mean - sum) / (total - set as f32);
+        let x = draw(mu, spread.fill, rng);
+        values[u] = x;
+        sum += x;
+        set += 1;
+    }
+    values
+}
+
+/// One clamped normal draw.
+fn draw(mean: f32, sigma: f32, rng: &mut impl Rng) -> f32 {
+    let x = match Normal::new(mean, sigma.max(0.0)) {
+        Ok(n) => n.sample(rng),
+        Err(_) => mean,
+    };
+    x.clamp(0.0, 1.0)
+}
+
+/// Colour assignment by weight (paper 4.3): units in random order take the palette's
+/// colours in a random order, each colour until its share of the total intensity reaches
+/// its weight.
+fn assign_colors(step: &ColorStep, look: &mut Look, rng: &mut impl Rng) {
+    let k = step.colors.len();
+    let share_of = |lights: &[usize], look: &Look| -> f32 {
+        lights.iter().map(|&l| look.levels[l].intensity).sum()
+    };
+    let unit_shares: Vec<f32> = step.units.iter().map(|u| share_of(u, look)).collect();
+    let labs: Vec<[f32; 3]> = step.colors.iter().map(|c| c.2).collect();
+    let mut share = vec![0.0f32; k];
+    let mut locked_total = 0.0;
+    for &l in &step.locked {
+        let lv = look.levels[l];
+        share[nearest(&labs, srgb_to_lab(full_value(lv.color)))] += lv.intensity;
+        locked_total += lv.intensity;
+    }
+    let mut total = locked_total + unit_shares.iter().sum::<f32>();
+    // All dark: share by count instead, so colours still follow the weights.
+    let by_count = total <= 1e-6;
+    if by_count {
+        share = vec![0.0; k];
+        for &l in &step.locked {
+            share[nearest(&labs, srgb_to_lab(full_value(look.levels[l].color)))] += 1.0;
+        }
+        total = (step.locked.len() + step.units.iter().map(Vec::len).sum::<usize>()) as f32;
+    }
+    let mut colors: Vec<usize> = (0..k).collect();
+    colors.shuffle(rng);
+    let mut units: Vec<usize> = (0..step.units.len()).collect();
+    units.shuffle(rng);
+    let full = |c: usize, share: &[f32]| share[c] >= step.colors[c].1 * total;
+    let mut at = 0;
+    for u in units {
+        while at + 1 < k && full(colors[at], &share) {
+            at += 1;
+        }
+        let c = colors[at];
+        for &l in &step.units[u] {
+            look.levels[l].color = step.colors[c].0;
+        }
+        share[c] += if by_count {
+            step.units[u].len() as f32
+        } else {
+            unit_shares[u]
+        };
+    }
+}
