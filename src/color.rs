@@ -13,7 +13,9 @@ pub fn srgb_to_linear(v: f32) -> f32 {
 /// Linear light (clamped to 0..1) to sRGB-encoded 0..1.
 pub fn linear_to_srgb(v: f32) -> f32 {
     let v = v.clamp(0.0, 1.0);
-    if v <= 0.003_130_8 {
+    if v >= 1.0 {
+        1.0 // exact, so full-value colours round-trip to 1.0
+    } else if v <= 0.003_130_8 {
         v * 12.92
     } else {
         1.055 * v.powf(1.0 / 2.4) - 0.055

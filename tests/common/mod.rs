@@ -17,7 +17,14 @@ pub struct TestLight {
 impl TestLight {
     /// A light patched at `address` on universe 1 that lights `rect` (pixel bounds, end
     /// exclusive) with `level` of white.
-    pub fn rect(channel: u32, group: Option<&'static str>, profile: &'static str, address: u16, rect: (usize, usize, usize, usize), level: f32) -> TestLight {
+    pub fn rect(
+        channel: u32,
+        group: Option<&'static str>,
+        profile: &'static str,
+        address: u16,
+        rect: (usize, usize, usize, usize),
+        level: f32,
+    ) -> TestLight {
         TestLight {
             channel,
             group,
@@ -45,7 +52,13 @@ pub fn write_exr(path: &Path, w: usize, h: usize, f: impl Fn(usize, usize) -> [f
 }
 
 /// Writes `dir/scene.toml` and `dir/basis/NNN.exr`; returns `dir`.
-pub fn write_scene(dir: &Path, w: usize, h: usize, groups: &[&str], lights: &[TestLight]) -> PathBuf {
+pub fn write_scene(
+    dir: &Path,
+    w: usize,
+    h: usize,
+    groups: &[&str],
+    lights: &[TestLight],
+) -> PathBuf {
     std::fs::create_dir_all(dir.join("basis")).expect("mkdir");
     let mut toml = String::from("name = \"test scene\"\n");
     for g in groups {
@@ -87,8 +100,19 @@ pub fn stripes(dir: &Path, n: usize, mixed: bool) -> PathBuf {
     let w = 4 * n;
     let lights: Vec<TestLight> = (0..n)
         .map(|i| {
-            let profile = if mixed && i % 2 == 1 { "dimmer" } else { "irgb" };
-            TestLight::rect(i as u32 + 1, None, profile, (i * 4 + 1) as u16, (i * 4, 0, i * 4 + 4, 10), 0.5)
+            let profile = if mixed && i % 2 == 1 {
+                "dimmer"
+            } else {
+                "irgb"
+            };
+            TestLight::rect(
+                i as u32 + 1,
+                None,
+                profile,
+                (i * 4 + 1) as u16,
+                (i * 4, 0, i * 4 + 4, 10),
+                0.5,
+            )
         })
         .collect();
     write_scene(dir, w, 10, &[], &lights)

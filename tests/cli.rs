@@ -1,0 +1,336 @@
+//! The offline subcommands through the real binary: results, and one-line errors for bad
+//! input with a non-zero exit and no panic.
+
+mod common;
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+use common::{bin, stripes, temp_dir, write_exr, write_png};
+
+fn run(args: &[&str]) -> Output {
+    Command::new(bin())
+        .args(args)
+        .output()
+        .expect("run visobjd")
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().expect("utf-8 temp path")
+}
+
+/// Asserts a clean failure: non-zero, one line on stderr mentioning `needle`, no panic.
+fn fails_with(out: &Output, needle: &str) {
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "should fail: {err}");
+    assert!(!err.contains("panicked"), "panicked: {err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "one line: {err}");
+    assert!(err.contains(needle), "`{needle}` not in: {err}");
+}
+
+fn reference(dir: &Path) -> std::path::PathBuf {
+    let p = dir.join("ref.png");
+    write_png(&p, 64, 40, |x, y| {
+        if x < 40 {
+            [250, 120, 30]
+        } else if y < 20 {
+            [20, 40, 120]
+        } else {
+            [200, 200, 190]
+        }
+    });
+    p
+}
+
+#[test]
+fn gallery_writes_a_numbered_contact_sheet_and_every_candidate() {
+    let dir = temp_dir("cli-gallery");
+    let scene = stripes(&dir.join("scene"), 12, true);
+    let r = reference(&dir);
+    let (sheet, json) = (dir.join("sheet.png"), dir.join("g.json"));
+    let args = [
+        "gallery",
+        "--scene",
+        s(&scene),
+        "--ref",
+        s(&r),
+        "--aspects",
+        "both",
+        "--seed",
+        "7",
+        "--out",
+        s(&sheet),
+        "--json",
+        s(&json),
+    ];
+    let out = run(&args);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let g: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    assert_eq!(g["seed"], 7);
+    assert_eq!(g["scene"], "test scene");
+    let candidates = g["candidates"].as_array().unwrap();
+    assert_eq!(candidates.len(), 100);
+    let entries = g["entries"].as_array().unwrap();
+    assert!(!entries.is_empty() && entries.len() <= 12);
+    for c in candidates {
+        let lights = c["lights"].as_array().unwrap();
+        assert_eq!(lights.len(), 12, "every light of the scene");
+        // Dimmers (even channels here) carry no colour.
+        assert!(lights[1].get("color").is_none());
+        assert!(lights[0]["color"].is_array());
+        let (e, m) = (c["entry"].as_u64().unwrap(), c["member"].as_u64().unwrap());
+        let members = entries[e as usize - 1]["members"].as_array().unwrap();
+        assert_eq!(members[m as usize - 1], c["index"]);
+    }
+    let o = &g["objectives"][0];
+    assert_eq!(o["image"], "ref.png");
+    let weights: f64 = o["palette"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p["weight"].as_f64().unwrap())
+        .sum();
+    assert!((weights - 1.0).abs() < 1e-4);
+    let img = image::open(&sheet).unwrap();
+    let cols = entries.len().min(4) as u32;
+    assert_eq!(
+        img.width(),
+        8 + cols * (48 + 8),
+        "4 columns of 48-px thumbnails"
+    );
+    // Same seed, same JSON.
+    let json2 = dir.join("g2.json");
+    let mut again = args.to_vec();
+    let n = again.len();
+    again[n - 1] = s(&json2);
+    assert!(run(&again).status.success());
+    assert_eq!(
+        std::fs::read(&json).unwrap(),
+        std::fs::read(&json2).unwrap()
+    );
+}
+
+#[test]
+fn gallery_takes_several_references_each_with_its_region() {
+    let dir = temp_dir("cli-multi");
+    let scene = stripes(&dir.join("scene"), 10, false);
+    let r = reference(&dir);
+    let json = dir.join("g.json");
+    let out = run(&[
+        "gallery",
+        "--scene",
+        s(&scene),
+        "--ref",
+        s(&r),
+        "--aspects",
+        "intensity",
+        "--ref",
+        s(&r),
+        "--aspects",
+        "color",
+        "--region",
+        "0,0,0.5,1",
+        "--count",
+        "20",
+        "--clusters",
+        "4",
+        "--seed",
+        "1",
+        "--out",
+        s(&dir.join("x.png")),
+        "--json",
+        s(&json),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let g: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    assert_eq!(g["objectives"][0]["aspects"], "intensity");
+    assert_eq!(
+        g["objectives"][0]["region"],
+        serde_json::json!([0.0, 0.0, 1.0, 1.0])
+    );
+    assert_eq!(g["objectives"][1]["aspects"], "color");
+    assert_eq!(
+        g["objectives"][1]["region"],
+        serde_json::json!([0.0, 0.0, 0.5, 1.0])
+    );
+    assert!(g["entries"].as_array().unwrap().len() <= 4);
+}
+
+#[test]
+fn render_draws_a_look_file() {
+    let dir = temp_dir("cli-render");
+    let scene = stripes(&dir.join("scene"), 4, false);
+    let look = dir.join("look.json");
+    std::fs::write(
+        &look,
+        r#"{"label": "test", "lights": [{"channel": 2, "intensity": 0.5, "color": [1.0, 0.0, 0.0]}]}"#,
+    )
+    .unwrap();
+    let png = dir.join("out.png");
+    let out = run(&[
+        "render",
+        "--scene",
+        s(&scene),
+        "--look",
+        s(&look),
+        "--out",
+        s(&png),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let img = image::open(&png).unwrap().to_rgb8();
+    assert_eq!(img.dimensions(), (16, 10));
+    // Light 2 lights columns 4..8 at 0.5 of white; at half intensity, red: linear 0.25.
+    let want = visobjd::color::encode_srgb8(0.25);
+    assert_eq!(img.get_pixel(5, 3).0, [want, 0, 0]);
+    assert_eq!(img.get_pixel(0, 3).0, [0, 0, 0]);
+
+    std::fs::write(&look, r#"{"lights": [{"channel": 99, "intensity": 0.5}]}"#).unwrap();
+    fails_with(
+        &run(&[
+            "render",
+            "--scene",
+            s(&scene),
+            "--look",
+            s(&look),
+            "--out",
+            s(&png),
+        ]),
+        "light 99 is not in the scene (channels 1-4)",
+    );
+}
+
+#[test]
+fn bad_scenes_fail_with_one_line_naming_the_problem() {
+    let dir = temp_dir("cli-bad-scene");
+    let r = reference(&dir);
+    let gallery = |scene: &Path| {
+        run(&[
+            "gallery",
+            "--scene",
+            s(scene),
+            "--ref",
+            s(&r),
+            "--out",
+            s(&dir.join("o.png")),
+        ])
+    };
+
+    let missing = stripes(&dir.join("missing"), 3, false);
+    std::fs::remove_file(missing.join("basis/002.exr")).unwrap();
+    fails_with(&gallery(&missing), "002.exr: file not found");
+
+    let sizes = stripes(&dir.join("sizes"), 3, false);
+    write_exr(&sizes.join("basis/003.exr"), 10, 10, |_, _| [1.0; 3]);
+    fails_with(&gallery(&sizes), "003.exr: is 10x10 but");
+
+    let truncated = stripes(&dir.join("truncated"), 3, false);
+    let path = truncated.join("basis/001.exr");
+    let bytes = std::fs::read(&path).unwrap();
+    std::fs::write(&path, &bytes[..bytes.len() / 2]).unwrap();
+    fails_with(&gallery(&truncated), "001.exr");
+
+    let profile = stripes(&dir.join("profile"), 2, false);
+    let toml = std::fs::read_to_string(profile.join("scene.toml")).unwrap();
+    std::fs::write(
+        profile.join("scene.toml"),
+        toml.replacen("irgb", "movinghead", 1),
+    )
+    .unwrap();
+    fails_with(&gallery(&profile), "unknown profile `movinghead`");
+
+    let overlap = stripes(&dir.join("overlap"), 2, false);
+    let toml = std::fs::read_to_string(overlap.join("scene.toml")).unwrap();
+    std::fs::write(
+        overlap.join("scene.toml"),
+        toml.replacen("address = 5", "address = 3", 1),
+    )
+    .unwrap();
+    fails_with(
+        &gallery(&overlap),
+        "lights 1 and 2 both use universe 1 slot 3",
+    );
+
+    let overflow = stripes(&dir.join("overflow"), 2, false);
+    let toml = std::fs::read_to_string(overflow.join("scene.toml")).unwrap();
+    std::fs::write(
+        overflow.join("scene.toml"),
+        toml.replacen("address = 5", "address = 510", 1),
+    )
+    .unwrap();
+    fails_with(&gallery(&overflow), "does not fit in slots 1-512");
+
+    let typo = stripes(&dir.join("typo"), 2, false);
+    let toml = std::fs::read_to_string(typo.join("scene.toml")).unwrap();
+    std::fs::write(
+        typo.join("scene.toml"),
+        toml.replacen("universe", "univers", 1),
+    )
+    .unwrap();
+    fails_with(&gallery(&typo), "line ");
+
+    let escape = stripes(&dir.join("escape"), 2, false);
+    let toml = std::fs::read_to_string(escape.join("scene.toml")).unwrap();
+    std::fs::write(
+        escape.join("scene.toml"),
+        toml.replacen("basis/001.exr", "../../etc/passwd", 1),
+    )
+    .unwrap();
+    fails_with(
+        &gallery(&escape),
+        "must be a relative path inside the scene folder",
+    );
+}
+
+#[test]
+fn bad_references_and_arguments_fail_with_one_line() {
+    let dir = temp_dir("cli-bad-ref");
+    let scene = stripes(&dir.join("scene"), 3, false);
+    let out = dir.join("o.png");
+    let gallery = |r: &Path, extra: &[&str]| {
+        let mut args = vec![
+            "gallery",
+            "--scene",
+            s(&scene),
+            "--ref",
+            s(r),
+            "--out",
+            s(&out),
+        ];
+        args.extend_from_slice(extra);
+        run(&args)
+    };
+    let empty = dir.join("empty.png");
+    std::fs::write(&empty, b"").unwrap();
+    fails_with(&gallery(&empty, &[]), "empty.png");
+
+    let text = dir.join("notes.png");
+    std::fs::write(&text, b"this is not a picture at all, just words\n").unwrap();
+    fails_with(&gallery(&text, &[]), "notes.png");
+
+    let corrupt = dir.join("corrupt.png");
+    let good = reference(&dir);
+    let bytes = std::fs::read(&good).unwrap();
+    std::fs::write(&corrupt, &bytes[..bytes.len() / 3]).unwrap();
+    fails_with(&gallery(&corrupt, &[]), "corrupt.png");
+
+    fails_with(&gallery(&dir.join("nope.png"), &[]), "nope.png");
+    fails_with(&gallery(&good, &["--region", "0.6,0,0.4,1"]), "x0 < x1");
+    fails_with(&gallery(&good, &["--aspects", "smell"]), "smell");
+    fails_with(
+        &gallery(&good, &["--key", "nosuch"]),
+        "group `nosuch` is not in the scene",
+    );
+    assert!(!out.exists(), "nothing written on failure");
+}

@@ -1,0 +1,378 @@
+//! The sampler's statistical properties (paper 4.2.3) and the designer's constraints,
+//! with fixed seeds and enough samples.
+
+mod common;
+
+use rand::SeedableRng;
+use rand::rngs::Xoshiro256PlusPlus as Rng;
+use rand_distr::{Distribution, Normal};
+use visobjd::look::{Level, Look};
+use visobjd::objective::{Aspects, PaletteColor, Region};
+use visobjd::sampler::{Constraints, Keys, Plan, Rig, Spread, Target, gibbs, key_count};
+
+fn mean(v: &[f32]) -> f32 {
+    v.iter().sum::<f32>() / v.len() as f32
+}
+
+fn variance(v: &[f32]) -> f32 {
+    let m = mean(v);
+    v.iter().map(|x| (x - m).powi(2)).sum::<f32>() / (v.len() - 1) as f32
+}
+
+/// A rig of `n` lights, each its own group, all colour-capable.
+fn rig(n: usize) -> Rig {
+    Rig {
+        groups: (0..n).map(|l| vec![l]).collect(),
+        colored: vec![true; n],
+    }
+}
+
+fn target(n: usize, mean: f32, key: f32, bright: f32) -> Target {
+    Target {
+        aspects: Aspects::Intensity,
+        area: 1.0,
+        selected: vec![true; n],
+        sensitivity: vec![1.0; n],
+        mean,
+        key,
+        bright,
+        palette: Vec::new(),
+    }
+}
+
+#[test]
+fn mean_intensity_sits_on_target_and_keys_on_key_level() {
+    let n = 24;
+    let (mu_a, mu_k, b) = (0.35, 0.8, 0.5);
+    let mut rng = Rng::seed_from_u64(1);
+    let keys = key_count(b, n);
+    assert_eq!(keys, 6);
+    let mut means = Vec::new();
+    let mut key_values = Vec::new();
+    for _ in 0..1000 {
+        let designated = Keys::Designated((0..n).map(|i| i < keys).collect());
+        let v = gibbs(
+            n,
+            0,
+            0.0,
+            &designated,
+            mu_a,
+            mu_k,
+            Spread::default(),
+            &mut rng,
+        );
+        means.push(mean(&v));
+        key_values.extend_from_slice(&v[..keys]);
+    }
+    assert!((mean(&means) - mu_a).abs() < 0.01, "mean {}", mean(&means));
+    assert!(
+        (mean(&key_values) - mu_k).abs() < 0.02,
+        "keys {}",
+        mean(&key_values)
+    );
+}
+
+/// The direct bimodal draw of paper 4.2.3: keys from N(mu_k, sigma_k), every fill from one
+/// N(mu_x, sigma_a) with mu_x from equation 2 evaluated once.
+fn bimodal(n: usize, keys: usize, mu_a: f32, mu_k: f32, rng: &mut Rng) -> Vec<f32> {
+    let s = Spread::default();
+    let key = Normal::new(mu_k, s.key).unwrap();
+    let mut v: Vec<f32> = (0..keys).map(|_| key.sample(rng).clamp(0.0, 1.0)).collect();
+    let sum: f32 = v.iter().sum();
+    let mu_x = (n as f32 * mu_a - sum) / (n - keys) as f32;
+    let fill = Normal::new(mu_x, s.fill).unwrap();
+    v.extend((keys..n).map(|_| fill.sample(rng).clamp(0.0, 1.0)));
+    v
+}
+
+#[test]
+fn sequential_sampling_is_tighter_overall_and_wider_per_light_than_bimodal() {
+    let n = 20;
+    let (mu_a, mu_k) = (0.4, 0.85);
+    let keys = 5;
+    let designated = Keys::Designated((0..n).map(|i| i < keys).collect());
+    let mut rng = Rng::seed_from_u64(2);
+    let mut g_means = Vec::new();
+    let mut b_means = Vec::new();
+    let mut g_fill = vec![Vec::new(); n];
+    let mut b_fill = vec![Vec::new(); n];
+    for _ in 0..2000 {
+        let g = gibbs(
+            n,
+            0,
+            0.0,
+            &designated,
+            mu_a,
+            mu_k,
+            Spread::default(),
+            &mut rng,
+        );
+        let b = bimodal(n, keys, mu_a, mu_k, &mut rng);
+        g_means.push(mean(&g));
+        b_means.push(mean(&b));
+        for i in keys..n {
+            g_fill[i].push(g[i]);
+            b_fill[i].push(b[i]);
+        }
+    }
+    let (g_sd, b_sd) = (variance(&g_means).sqrt(), variance(&b_means).sqrt());
+    assert!(
+        g_sd * 3.0 <= b_sd,
+        "spread of the mean: sequential {g_sd}, bimodal {b_sd}"
+    );
+    let g_var = mean(&(keys..n).map(|i| variance(&g_fill[i])).collect::<Vec<_>>());
+    let b_var = mean(&(keys..n).map(|i| variance(&b_fill[i])).collect::<Vec<_>>());
+    assert!(
+        g_var > b_var,
+        "per-light variance: sequential {g_var}, bimodal {b_var}"
+    );
+}
+
+#[test]
+fn full_sampler_hits_the_mean_over_a_thousand_candidates() {
+    let n = 16;
+    let r = rig(n);
+    let t = target(n, 0.45, 0.9, 0.4);
+    let base = Look::off(n);
+    let plan = Plan::new(&r, &Constraints::none(&r), &[t], &base, Spread::default());
+    let mut rng = Rng::seed_from_u64(3);
+    let means: Vec<f32> = (0..1000)
+        .map(|_| {
+            let look = plan.sample(&base, &mut rng);
+            mean(&look.levels.iter().map(|l| l.intensity).collect::<Vec<_>>())
+        })
+        .collect();
+    assert!((mean(&means) - 0.45).abs() < 0.01, "{}", mean(&means));
+}
+
+#[test]
+fn a_flat_reference_gives_no_keys() {
+    assert_eq!(key_count(0.0, 40), 0);
+    assert_eq!(key_count(1.0, 40), 20);
+    assert_eq!(key_count(0.5, 40), 10);
+}
+
+#[test]
+fn brightness_normalisation_evens_out_lights_of_different_strength() {
+    // Light 0 is four times as strong in the region as light 1: it gets a quarter of the
+    // factor, and the factors' mean over the two is one.
+    let r = rig(2);
+    let mut t = target(2, 0.5, 0.5, 0.0);
+    t.sensitivity = vec![4.0, 1.0];
+    let base = Look::off(2);
+    let plan = Plan::new(
+        &r,
+        &Constraints::none(&r),
+        &[t],
+        &base,
+        Spread {
+            key: 0.0,
+            fill: 0.0,
+        },
+    );
+    let look = plan.sample(&base, &mut Rng::seed_from_u64(4));
+    // Raw draws are both 0.5; factors (1/4)/(5/8) = 0.4 and 1/(5/8) = 1.6 (capped at 1).
+    assert!((look.levels[0].intensity - 0.2).abs() < 1e-6, "{:?}", look);
+    assert!((look.levels[1].intensity - 0.8).abs() < 1e-6, "{:?}", look);
+}
+
+#[test]
+fn groups_share_one_value_and_locked_lights_keep_the_base_exactly() {
+    let n = 9;
+    let r = Rig {
+        groups: vec![vec![0, 1, 2], vec![3, 4, 5], vec![6, 7, 8]],
+        colored: vec![true; n],
+    };
+    let mut base = Look::off(n);
+    for (i, l) in base.levels.iter_mut().enumerate() {
+        *l = Level {
+            intensity: 0.1 + 0.07 * i as f32,
+            color: [0.3, 0.6, 0.9],
+        };
+    }
+    let mut c = Constraints::none(&r);
+    c.locked[4] = true; // one light of group 2
+    for l in [6, 7, 8] {
+        c.locked[l] = true; // all of group 3
+    }
+    let mut t = target(n, 0.6, 0.9, 0.5);
+    t.aspects = Aspects::Both;
+    t.palette = vec![PaletteColor {
+        color: [1.0, 0.0, 0.0],
+        weight: 1.0,
+    }];
+    let plan = Plan::new(&r, &c, &[t], &base, Spread::default());
+    let mut rng = Rng::seed_from_u64(5);
+    for _ in 0..200 {
+        let look = plan.sample(&base, &mut rng);
+        for l in [4, 6, 7, 8] {
+            assert_eq!(
+                look.levels[l].intensity.to_bits(),
+                base.levels[l].intensity.to_bits()
+            );
+            assert_eq!(look.levels[l].color, base.levels[l].color);
+        }
+        assert_eq!(look.levels[0].intensity, look.levels[1].intensity);
+        assert_eq!(look.levels[1].intensity, look.levels[2].intensity);
+        assert_eq!(look.levels[3].intensity, look.levels[5].intensity);
+        assert_eq!(look.levels[0].color, [1.0, 0.0, 0.0]);
+    }
+}
+
+#[test]
+fn colours_follow_their_weights_and_dimmers_stay_white() {
+    let n = 40;
+    let mut r = rig(n);
+    for l in (0..n).step_by(4) {
+        r.colored[l] = false;
+    }
+    let mut base = Look::off(n);
+    for l in &mut base.levels {
+        l.intensity = 0.5;
+    }
+    let mut t = target(n, 0.5, 0.5, 0.0);
+    t.aspects = Aspects::Color;
+    let red = [1.0, 0.0, 0.0];
+    let blue = [0.0, 0.0, 1.0];
+    t.palette = vec![
+        PaletteColor {
+            color: red,
+            weight: 0.7,
+        },
+        PaletteColor {
+            color: blue,
+            weight: 0.3,
+        },
+    ];
+    let plan = Plan::new(&r, &Constraints::none(&r), &[t], &base, Spread::default());
+    let mut rng = Rng::seed_from_u64(6);
+    let mut red_share = Vec::new();
+    for _ in 0..500 {
+        let look = plan.sample(&base, &mut rng);
+        let coloured: Vec<&Level> = (0..n)
+            .filter(|&l| r.colored[l])
+            .map(|l| &look.levels[l])
+            .collect();
+        red_share.push(
+            coloured.iter().filter(|l| l.color == red).count() as f32 / coloured.len() as f32,
+        );
+        for l in (0..n).step_by(4) {
+            assert_eq!(look.levels[l].color, [1.0; 3], "dimmer {l} was coloured");
+        }
+        assert_eq!(
+            look.levels[1].intensity, 0.5,
+            "colour-only changes no intensity"
+        );
+    }
+    assert!(
+        (mean(&red_share) - 0.7).abs() < 0.05,
+        "{}",
+        mean(&red_share)
+    );
+}
+
+#[test]
+fn palette_colours_take_full_value() {
+    let c = visobjd::sampler::full_value([0.2, 0.1, 0.05]);
+    assert!((c[0] - 1.0).abs() < 1e-6, "{c:?}");
+    assert!(c[1] < 1.0 && c[2] < c[1]);
+    assert_eq!(visobjd::sampler::full_value([0.0; 3]), [1.0; 3]);
+}
+
+#[test]
+fn the_smaller_region_wins_the_lights_both_select() {
+    let n = 10;
+    let r = rig(n);
+    let base = Look::off(n);
+    let palette = |c: [f32; 3]| {
+        vec![PaletteColor {
+            color: c,
+            weight: 1.0,
+        }]
+    };
+    let mut small = target(n, 0.5, 0.5, 0.0);
+    small.aspects = Aspects::Color;
+    small.area = 0.3;
+    small.selected = (0..n).map(|l| l < 3).collect();
+    small.palette = palette([0.0, 0.0, 1.0]);
+    let mut whole = target(n, 0.5, 0.5, 0.0);
+    whole.aspects = Aspects::Color;
+    whole.palette = palette([1.0, 0.0, 0.0]);
+    // Given small first: the order of objectives must not matter, the area does.
+    let plan = Plan::new(
+        &r,
+        &Constraints::none(&r),
+        &[small, whole],
+        &base,
+        Spread::default(),
+    );
+    let look = plan.sample(&base, &mut Rng::seed_from_u64(7));
+    for l in 0..n {
+        let want = if l < 3 {
+            [0.0, 0.0, 1.0]
+        } else {
+            [1.0, 0.0, 0.0]
+        };
+        assert_eq!(look.levels[l].color, want, "light {l}");
+    }
+}
+
+#[test]
+fn region_targeting_selects_exactly_the_expected_lights() {
+    use common::{TestLight, temp_dir, write_scene};
+    let dir = temp_dir("region");
+    // 40x20 stage; the region is the left quarter (x < 10).
+    let lights = vec![
+        // 1: lights everything evenly: its bright pixels cover the region (> 25%).
+        TestLight::rect(1, None, "dimmer", 1, (0, 0, 40, 20), 0.3),
+        // 2: lights only the right half: not selected.
+        TestLight::rect(2, None, "dimmer", 2, (20, 0, 40, 20), 0.8),
+        // 3: a small spot inside the region: its light is contained there (> 50%).
+        TestLight::rect(3, None, "dimmer", 3, (2, 2, 6, 6), 1.0),
+        // 4: mostly the right half, dim, plus a hot spot in the region: highlights (> 5%).
+        TestLight {
+            channel: 4,
+            group: None,
+            profile: "dimmer",
+            universe: 1,
+            address: 4,
+            pixel: Box::new(|x, y| {
+                if (4..8).contains(&x) && (8..12).contains(&y) {
+                    [2.0; 3]
+                } else if x >= 20 {
+                    [0.1 + 0.001 * (x + 40 * y) as f32; 3]
+                } else {
+                    [0.0; 3]
+                }
+            }),
+        },
+        // 5: right side with a bright stripe just outside the region: not selected.
+        TestLight {
+            channel: 5,
+            group: None,
+            profile: "dimmer",
+            universe: 1,
+            address: 5,
+            pixel: Box::new(|x, _| {
+                if x >= 10 && x < 12 {
+                    [1.0; 3]
+                } else if x >= 12 {
+                    [0.2; 3]
+                } else {
+                    [0.0; 3]
+                }
+            }),
+        },
+    ];
+    write_scene(&dir, 40, 20, &[], &lights);
+    let stage = visobjd::stage::Stage::load(&dir, 40).unwrap();
+    let selected = stage
+        .footprints
+        .select(Region::new(0.0, 0.0, 0.25, 1.0).unwrap());
+    assert_eq!(selected, vec![true, false, true, true, false]);
+    assert_eq!(stage.footprints.select(Region::FULL), vec![true; 5]);
+    let s = stage
+        .footprints
+        .sensitivity(Region::new(0.0, 0.0, 0.25, 1.0).unwrap());
+    assert!(s[1] == 0.0 && s[0] > 0.0 && s[2] > 0.0);
+}
