@@ -354,7 +354,7 @@ fn region_targeting_selects_exactly_the_expected_lights() {
             universe: 1,
             address: 5,
             pixel: Box::new(|x, _| {
-                if x >= 10 && x < 12 {
+                if (10..12).contains(&x) {
                     [1.0; 3]
                 } else if x >= 12 {
                     [0.2; 3]
