@@ -3,4 +3,5 @@
 pub mod color;
 pub mod dmx;
 pub mod look;
+pub mod output;
 pub mod scene;
