@@ -585,3 +585,22 @@ impl Clock {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn send_errors_are_logged_once_per_ten_seconds() {
+        let mut log = Throttle::default();
+        let to: SocketAddr = "127.0.0.1:6454".parse().expect("addr");
+        let t0 = Instant::now();
+        log.error(t0, "Art-Net", to, "first");
+        log.error(t0 + Duration::from_secs(1), "Art-Net", to, "quiet");
+        log.error(t0 + Duration::from_secs(9), "Art-Net", to, "quiet");
+        assert_eq!((log.last, log.suppressed), (Some(t0), 2));
+        let t1 = t0 + Duration::from_secs(10);
+        log.error(t1, "Art-Net", to, "again");
+        assert_eq!((log.last, log.suppressed), (Some(t1), 0));
+    }
+}
