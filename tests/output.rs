@@ -253,13 +253,13 @@ fn wait_artnet(sock: &UdpSocket, port_address: u16, want: impl Fn(&ArtDmx) -> bo
 
 #[test]
 fn frames_are_continuous_and_sequenced() {
-    let rig = rig(20);
+    let rig = rig(10);
     let dir = state_dir("continuous");
     let out = start(&rig.config, &dir, look(1.0, [1.0; 3]));
     let window = Duration::from_millis(1000);
     let (sacn, _) = receive_until(&rig.sacn, window, |_| false);
     let (art, _) = receive_until(&rig.artnet, Duration::from_millis(100), |_| false);
-    let period = Duration::from_millis(50);
+    let period = Duration::from_millis(100);
 
     let mut by_universe: BTreeMap<u16, Vec<(Instant, Sacn)>> = BTreeMap::new();
     for (t, p) in &sacn {
@@ -273,10 +273,10 @@ fn frames_are_continuous_and_sequenced() {
     }
     assert_eq!(by_universe.keys().copied().collect::<Vec<_>>(), [1, 2]);
     for (u, packets) in &by_universe {
-        // ~20 in one second; generous bounds, this is a correctness check.
+        // ~10 in one second; generous bounds, this is a correctness check.
         assert!(
-            (12..=24).contains(&packets.len()),
-            "universe {u}: {} frames in 1 s at 20 Hz",
+            (6..=12).contains(&packets.len()),
+            "universe {u}: {} frames in 1 s at 10 Hz",
             packets.len()
         );
         for w in packets.windows(2) {
@@ -303,7 +303,7 @@ fn frames_are_continuous_and_sequenced() {
     assert_eq!(last.keys().copied().collect::<Vec<_>>(), [0, 1]);
 
     let stats = out.stats();
-    assert!(stats.frames.iter().all(|&(_, n)| n >= 12), "{stats:?}");
+    assert!(stats.frames.iter().all(|&(_, n)| n >= 6), "{stats:?}");
     assert_eq!(stats.send_errors, 0);
     out.shutdown();
     std::fs::remove_dir_all(&dir).ok();

@@ -203,8 +203,8 @@ impl Output {
         })
     }
 
-    /// Crossfades from what is on the wire now to `look` over `fade_s` seconds (0 or less:
-    /// at once). Never blocks on the sender.
+    /// Crossfades from what is on the wire now to `look` over `fade_s` seconds (0, less or
+    /// not finite: at once; at most an hour). Never blocks on the sender.
     pub fn set_look(&self, look: Look, fade_s: f32) {
         let fade = if fade_s.is_finite() && fade_s > 0.0 {
             Duration::from_secs_f32(fade_s.min(3600.0))
