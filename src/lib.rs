@@ -7,6 +7,7 @@ pub mod dmx;
 pub mod gallery;
 pub mod look;
 pub mod objective;
+pub mod output;
 pub mod render;
 pub mod sampler;
 pub mod scene;

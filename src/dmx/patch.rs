@@ -1,0 +1,443 @@
+//! Look to slot levels: where each light's slots sit, and what a look asks of them.
+//!
+//! Levels stay `f32` 0..1 until the last step so that crossfades and master act on the
+//! exact value, and a 16-bit intensity fades as one 16-bit number rather than as a coarse
+//! byte that jumps and a fine byte that saws.
+
+use crate::dmx::profile::Slot;
+use crate::look::{Level, Look};
+use crate::scene::Scene;
+
+/// Slots in a DMX universe.
+pub const SLOTS: usize = 512;
+
+/// Approximate linear-sRGB colour of an amber emitter (~590 nm) at full. Amber is
+/// extracted from the wanted colour as the largest multiple of this that fits under it.
+pub const AMBER: [f32; 3] = [1.0, 0.45, 0.0];
+
+/// Approximate linear-sRGB colour of a lime emitter (~565 nm, phosphor yellow-green) at
+/// full, extracted like [`AMBER`].
+pub const LIME: [f32; 3] = [0.5, 1.0, 0.0];
+
+/// How the grand master acts on one slot's level. Every rule is affine in the level, so
+/// mastering commutes with a crossfade: a fade can run on unmastered levels while the
+/// master moves at once.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Rule {
+    /// Not an intensity: colour at full behind a dimmer, `uv`, `fixed:N`, unused slots.
+    Keep,
+    /// Carries intensity: a dimmer, or an emitter with intensity folded in.
+    Scale,
+    /// A subtractive flag with intensity folded in (no dimmer): `1 - (1 - v) * master`.
+    Complement,
+}
+
+/// One light's place in the patch.
+#[derive(Debug, Clone)]
+struct Placed {
+    /// Index into [`Patch::universes`].
+    universe: usize,
+    /// 0-based slot of the light's first channel.
+    offset: usize,
+    slots: Vec<Slot>,
+    has_intensity: bool,
+}
+
+/// The scene's DMX patch: which universes exist and where every light's slots are.
+#[derive(Debug, Clone)]
+pub struct Patch {
+    universes: Vec<u16>,
+    lights: Vec<Placed>,
+    /// Per universe, per slot: how master applies.
+    rules: Vec<Vec<Rule>>,
+    /// Per universe: 0-based coarse slots of 16-bit pairs (the fine slot follows).
+    wide: Vec<Vec<usize>>,
+}
+
+/// Levels (0..1) of every slot of every patched universe, in [`Patch::universes`] order,
+/// before quantisation. The coarse slot of a 16-bit pair holds the pair's whole level;
+/// its fine slot is unused until [`Patch::quantise`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct Frame {
+    levels: Vec<f32>,
+}
+
+impl Frame {
+    /// The levels of universe number `index` (an index into [`Patch::universes`]).
+    pub fn universe(&self, index: usize) -> &[f32] {
+        &self.levels[index * SLOTS..(index + 1) * SLOTS]
+    }
+
+    /// Linear crossfade of every slot: `from` at `t = 0`, `to` at `t = 1`.
+    pub fn crossfade(from: &Frame, to: &Frame, t: f32) -> Frame {
+        let t = unit(t);
+        Frame {
+            levels: from
+                .levels
+                .iter()
+                .zip(&to.levels)
+                .map(|(a, b)| a + (b - a) * t)
+                .collect(),
+        }
+    }
+}
+
+/// `v` clamped to 0..1, with NaN as 0, so no outside value can reach the wire as garbage.
+fn unit(v: f32) -> f32 {
+    if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) }
+}
+
+/// Takes the largest multiple `k` (0..1) of `emitter` that fits under `c`, subtracts it,
+/// and returns `k`.
+fn extract(c: &mut [f32; 3], emitter: [f32; 3]) -> f32 {
+    let k = (0..3)
+        .filter(|&i| emitter[i] > 0.0)
+        .map(|i| c[i] / emitter[i])
+        .fold(1.0f32, f32::min)
+        .max(0.0);
+    for (v, e) in c.iter_mut().zip(emitter) {
+        *v = (*v - k * e).max(0.0);
+    }
+    k
+}
+
+impl Patch {
+    /// The patch of a validated scene (which guarantees footprints fit and never overlap).
+    pub fn new(scene: &Scene) -> Patch {
+        let mut universes: Vec<u16> = scene.lights.iter().map(|l| l.universe).collect();
+        universes.sort_unstable();
+        universes.dedup();
+        let mut rules = vec![vec![Rule::Keep; SLOTS]; universes.len()];
+        let mut wide = vec![Vec::new(); universes.len()];
+        let mut lights = Vec::with_capacity(scene.lights.len());
+        for (i, light) in scene.lights.iter().enumerate() {
+            let profile = scene.profile(i);
+            let universe = universes.binary_search(&light.universe).unwrap_or_default();
+            let offset = usize::from(light.address.max(1)) - 1;
+            let has_intensity = profile.has_intensity();
+            let mut at = offset;
+            for &slot in &profile.slots {
+                let rule = match slot {
+                    Slot::Intensity | Slot::Intensity16 => Rule::Scale,
+                    Slot::Red
+                    | Slot::Green
+                    | Slot::Blue
+                    | Slot::White
+                    | Slot::Amber
+                    | Slot::Lime
+                        if !has_intensity =>
+                    {
+                        Rule::Scale
+                    }
+                    Slot::Cyan | Slot::Magenta | Slot::Yellow if !has_intensity => Rule::Complement,
+                    _ => Rule::Keep,
+                };
+                if at + slot.width() <= SLOTS {
+                    rules[universe][at] = rule;
+                    if slot == Slot::Intensity16 {
+                        wide[universe].push(at);
+                    }
+                }
+                at += slot.width();
+            }
+            lights.push(Placed {
+                universe,
+                offset,
+                slots: profile.slots.clone(),
+                has_intensity,
+            });
+        }
+        Patch {
+            universes,
+            lights,
+            rules,
+            wide,
+        }
+    }
+
+    /// The universes the scene patches, ascending; frames and byte buffers follow this order.
+    pub fn universes(&self) -> &[u16] {
+        &self.universes
+    }
+
+    /// Every slot 0, fixed slots included: what blackout sends.
+    pub fn blackout(&self) -> Frame {
+        Frame {
+            levels: vec![0.0; self.universes.len() * SLOTS],
+        }
+    }
+
+    /// The slot levels `look` asks for with the grand master at `master`.
+    pub fn levels(&self, look: &Look, master: f32) -> Frame {
+        self.mastered(&self.unmastered(look), master)
+    }
+
+    /// The slot levels of `look` at master 1. Fades run on these so the master can move
+    /// at once, independently of a fade in progress ([`Patch::mastered`] applies it).
+    ///
+    /// Per light: `intensity` slots get the intensity; with a dimmer the emitters get the
+    /// linear colour at full (the compositor's [`Level::multiplier`] at intensity 1),
+    /// without one the intensity is folded in (the whole multiplier). `white` takes
+    /// min(r, g, b) out of the emitters, then `amber` and `lime` take the largest multiple
+    /// of [`AMBER`] and [`LIME`] that fits; `cyan`/`magenta`/`yellow` are 1 - r/g/b of the
+    /// colour before extraction; `uv` is 0 and `fixed:N` is N. A light missing from the
+    /// look is off.
+    pub fn unmastered(&self, look: &Look) -> Frame {
+        let mut frame = self.blackout();
+        for (i, light) in self.lights.iter().enumerate() {
+            let level = look.levels.get(i).copied().unwrap_or(Level::OFF);
+            let intensity = unit(level.intensity);
+            let full = Level {
+                intensity: 1.0,
+                ..level
+            }
+            .multiplier()
+            .map(unit);
+            let folded = if light.has_intensity {
+                full
+            } else {
+                full.map(|v| v * intensity)
+            };
+            let mut c = folded;
+            let has = |s: Slot| light.slots.contains(&s);
+            let white = if has(Slot::White) {
+                let w = c[0].min(c[1]).min(c[2]);
+                c = c.map(|v| v - w);
+                w
+            } else {
+                0.0
+            };
+            let amber = if has(Slot::Amber) {
+                extract(&mut c, AMBER)
+            } else {
+                0.0
+            };
+            let lime = if has(Slot::Lime) {
+                extract(&mut c, LIME)
+            } else {
+                0.0
+            };
+            let base = light.universe * SLOTS;
+            let mut at = light.offset;
+            for &slot in &light.slots {
+                let v = match slot {
+                    Slot::Intensity | Slot::Intensity16 => intensity,
+                    Slot::Red => c[0],
+                    Slot::Green => c[1],
+                    Slot::Blue => c[2],
+                    Slot::White => white,
+                    Slot::Amber => amber,
+                    Slot::Lime => lime,
+                    Slot::Uv => 0.0,
+                    Slot::Cyan => 1.0 - folded[0],
+                    Slot::Magenta => 1.0 - folded[1],
+                    Slot::Yellow => 1.0 - folded[2],
+                    Slot::Fixed(n) => f32::from(n) / 255.0,
+                };
+                if at < SLOTS {
+                    frame.levels[base + at] = unit(v);
+                }
+                at += slot.width();
+            }
+        }
+        frame
+    }
+
+    /// `frame` (unmastered levels) with the grand master applied to the slots that carry
+    /// intensity.
+    pub fn mastered(&self, frame: &Frame, master: f32) -> Frame {
+        let m = unit(master);
+        let levels = frame
+            .levels
+            .iter()
+            .zip(self.rules.iter().flatten())
+            .map(|(&v, rule)| match rule {
+                Rule::Keep => v,
+                Rule::Scale => v * m,
+                Rule::Complement => 1.0 - (1.0 - v) * m,
+            })
+            .collect();
+        Frame { levels }
+    }
+
+    /// DMX bytes, one 512-slot buffer per universe: 8-bit slots round `level * 255`; a
+    /// 16-bit pair takes `v = round(level * 65535)` as coarse `v >> 8`, fine `v & 255`.
+    pub fn quantise(&self, frame: &Frame) -> Vec<[u8; SLOTS]> {
+        (0..self.universes.len())
+            .map(|u| {
+                let levels = frame.universe(u);
+                let mut out = [0u8; SLOTS];
+                for (byte, &v) in out.iter_mut().zip(levels) {
+                    *byte = (unit(v) * 255.0).round() as u8;
+                }
+                for &o in &self.wide[u] {
+                    let v = (unit(levels[o]) * 65535.0).round() as u16;
+                    out[o] = (v >> 8) as u8;
+                    out[o + 1] = (v & 0xff) as u8;
+                }
+                out
+            })
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::path::Path;
+
+    /// One light per profile, in universe 1 at 10-slot spacing (and one in universe 3),
+    /// so every light's bytes can be read at a known place.
+    fn scene() -> Scene {
+        let mut text = String::from(
+            "[[profile]]\nname = \"custom\"\nchannels = [\"fixed:255\", \"intensity16\", \"cyan\", \"magenta\", \"yellow\", \"uv\", \"fixed:7\"]\n",
+        );
+        let profiles = [
+            "dimmer", "dimmer16", "rgb", "irgb", "rgbw", "irgbw", "rgba", "custom",
+        ];
+        for (i, p) in profiles.iter().enumerate() {
+            text += &format!(
+                "[[light]]\nchannel = {}\nbasis = \"b.exr\"\nprofile = \"{p}\"\nuniverse = 1\naddress = {}\n",
+                i + 1,
+                i * 10 + 1
+            );
+        }
+        text += "[[light]]\nchannel = 20\nbasis = \"b.exr\"\nprofile = \"dimmer\"\nuniverse = 3\naddress = 512\n";
+        Scene::parse(Path::new("/nonexistent"), &text).expect("test scene parses")
+    }
+
+    /// Every light at `intensity` with sRGB colour `color`.
+    fn look(scene: &Scene, intensity: f32, color: [f32; 3]) -> Look {
+        Look {
+            levels: vec![Level { intensity, color }; scene.lights.len()],
+        }
+    }
+
+    /// The bytes of the light at profile index `i` (its address is `i * 10 + 1`).
+    fn bytes_of(bytes: &[[u8; SLOTS]], i: usize, width: usize) -> Vec<u8> {
+        bytes[0][i * 10..i * 10 + width].to_vec()
+    }
+
+    #[test]
+    fn universes_are_sorted_and_unused_slots_zero() {
+        let scene = scene();
+        let patch = Patch::new(&scene);
+        assert_eq!(patch.universes(), &[1, 3]);
+        let bytes = patch.quantise(&patch.levels(&look(&scene, 1.0, [1.0; 3]), 1.0));
+        assert_eq!(bytes.len(), 2);
+        assert_eq!(bytes[1][511], 255);
+        assert!(bytes[1][..511].iter().all(|&b| b == 0));
+        assert_eq!(bytes[0][1..10], [0; 9]);
+        assert!(bytes[0][80..].iter().all(|&b| b == 0));
+    }
+
+    #[test]
+    fn built_in_profiles_bytes() {
+        let scene = scene();
+        let patch = Patch::new(&scene);
+        // sRGB 0.5 decodes to linear 0.21404 (byte 55); intensity 0.5 is byte 128.
+        let b = patch.quantise(&patch.levels(&look(&scene, 0.5, [1.0, 0.5, 0.0]), 1.0));
+        assert_eq!(bytes_of(&b, 0, 1), [128], "dimmer");
+        assert_eq!(bytes_of(&b, 1, 2), [128, 0], "dimmer16");
+        assert_eq!(bytes_of(&b, 2, 3), [128, 27, 0], "rgb folds intensity in");
+        assert_eq!(
+            bytes_of(&b, 3, 4),
+            [128, 255, 55, 0],
+            "irgb: colour at full"
+        );
+        // rgba: amber (1, 0.45, 0) takes 0.21404 / 0.45 = 0.4757 of red and all green.
+        let full = patch.quantise(&patch.levels(&look(&scene, 1.0, [1.0, 0.5, 0.0]), 1.0));
+        assert_eq!(bytes_of(&full, 6, 4), [134, 0, 0, 121], "rgba");
+    }
+
+    #[test]
+    fn white_extraction() {
+        let scene = scene();
+        let patch = Patch::new(&scene);
+        // linear (1, 1, 0.214): white takes 0.214 from each emitter.
+        let b = patch.quantise(&patch.levels(&look(&scene, 0.5, [1.0, 1.0, 0.5]), 1.0));
+        assert_eq!(
+            bytes_of(&b, 4, 4),
+            [100, 100, 0, 27],
+            "rgbw, intensity folded"
+        );
+        assert_eq!(bytes_of(&b, 5, 5), [128, 200, 200, 0, 55], "irgbw");
+        let white = patch.quantise(&patch.levels(&look(&scene, 1.0, [1.0; 3]), 1.0));
+        assert_eq!(bytes_of(&white, 4, 4), [0, 0, 0, 255]);
+    }
+
+    #[test]
+    fn sixteen_bit_split() {
+        let scene = scene();
+        let patch = Patch::new(&scene);
+        // 0.75 * 65535 = 49151.25 -> 49151 = 191 * 256 + 255.
+        let b = patch.quantise(&patch.levels(&look(&scene, 0.75, [1.0; 3]), 1.0));
+        assert_eq!(bytes_of(&b, 1, 2), [191, 255]);
+        let b = patch.quantise(&patch.levels(&look(&scene, 1.0, [1.0; 3]), 1.0));
+        assert_eq!(bytes_of(&b, 1, 2), [255, 255]);
+    }
+
+    #[test]
+    fn custom_profile_with_fixed_slots() {
+        let scene = scene();
+        let patch = Patch::new(&scene);
+        let b = patch.quantise(&patch.levels(&look(&scene, 0.5, [1.0, 0.5, 0.0]), 1.0));
+        // fixed:255, intensity16 (0.5 -> 32768), C = 1 - 1, M = 1 - 0.214, Y = 1 - 0, uv, fixed:7
+        assert_eq!(bytes_of(&b, 7, 8), [255, 128, 0, 0, 200, 255, 0, 7]);
+        let off = patch.quantise(&patch.levels(&look(&scene, 0.0, [1.0, 0.5, 0.0]), 1.0));
+        assert_eq!(bytes_of(&off, 7, 8), [255, 0, 0, 0, 200, 255, 0, 7]);
+    }
+
+    #[test]
+    fn master_scales_intensity_only() {
+        let scene = scene();
+        let patch = Patch::new(&scene);
+        let b = patch.quantise(&patch.levels(&look(&scene, 1.0, [1.0, 0.5, 0.0]), 0.5));
+        assert_eq!(bytes_of(&b, 0, 1), [128]);
+        assert_eq!(bytes_of(&b, 1, 2), [128, 0]);
+        assert_eq!(bytes_of(&b, 2, 3), [128, 27, 0], "folded emitters scale");
+        assert_eq!(
+            bytes_of(&b, 3, 4),
+            [128, 255, 55, 0],
+            "colour behind a dimmer stays"
+        );
+        assert_eq!(bytes_of(&b, 7, 8)[0], 255, "fixed slots stay");
+    }
+
+    #[test]
+    fn master_commutes_with_crossfade() {
+        let scene = scene();
+        let patch = Patch::new(&scene);
+        let a = patch.unmastered(&look(&scene, 0.2, [0.3, 0.9, 1.0]));
+        let b = patch.unmastered(&look(&scene, 0.9, [1.0, 0.2, 0.4]));
+        let x = patch.mastered(&Frame::crossfade(&a, &b, 0.3), 0.6);
+        let y = Frame::crossfade(&patch.mastered(&a, 0.6), &patch.mastered(&b, 0.6), 0.3);
+        for (p, q) in x.levels.iter().zip(&y.levels) {
+            assert!((p - q).abs() < 1e-6);
+        }
+    }
+
+    #[test]
+    fn crossfade_midpoint() {
+        let scene = scene();
+        let patch = Patch::new(&scene);
+        let on = patch.levels(&look(&scene, 1.0, [1.0; 3]), 1.0);
+        let mid = patch.quantise(&Frame::crossfade(&patch.blackout(), &on, 0.5));
+        assert_eq!(bytes_of(&mid, 0, 1), [128]);
+        // The 16-bit pair fades as one number: 0.5 -> 32768, not (128, 128).
+        assert_eq!(bytes_of(&mid, 1, 2), [128, 0]);
+        assert_eq!(Frame::crossfade(&patch.blackout(), &on, 1.0), on);
+        assert_eq!(
+            Frame::crossfade(&patch.blackout(), &on, 0.0),
+            patch.blackout()
+        );
+    }
+
+    #[test]
+    fn blackout_is_all_zeros() {
+        let scene = scene();
+        let patch = Patch::new(&scene);
+        let b = patch.quantise(&patch.blackout());
+        assert!(b.iter().all(|u| u.iter().all(|&v| v == 0)));
+    }
+}

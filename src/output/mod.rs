@@ -1,0 +1,606 @@
+//! DMX output: sACN and Art-Net senders on their own clock (dmx.md).
+//!
+//! The engine hands over the desired state through a `tokio::sync::watch` channel and
+//! never waits on the sender; a dedicated OS thread ticks at `rate_hz` with absolute
+//! deadlines, computes the frame (crossfade, master, blackout) and sends one packet per
+//! universe per destination. Nothing on the OSC or generate side can delay a frame, and
+//! nothing here waits on the async runtime.
+
+mod cid;
+mod config;
+mod wire;
+
+pub use config::{ArtnetDest, OutputConfig, SacnDest};
+
+use std::collections::HashMap;
+use std::io;
+use std::net::{IpAddr, Ipv4Addr, SocketAddr, UdpSocket};
+use std::path::Path;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::thread::{self, JoinHandle};
+use std::time::{Duration, Instant};
+
+use tokio::sync::watch;
+use uuid::Uuid;
+
+use crate::dmx::patch::{Frame, Patch, SLOTS};
+use crate::look::Look;
+use config::SacnTarget;
+use wire::SacnSource;
+
+/// Why the output could not start.
+#[derive(Debug, thiserror::Error)]
+pub enum OutputError {
+    /// The `[output]` section is invalid for this scene (the message names the key).
+    #[error("{0}")]
+    Config(String),
+    /// A `bind` address could not be bound.
+    #[error("output: cannot bind {addr}: {source}")]
+    Bind {
+        /// The configured `bind`.
+        addr: SocketAddr,
+        /// What the OS said.
+        source: io::Error,
+    },
+    /// The sACN CID in `state_dir` could not be read or written.
+    #[error("output: sACN CID in {dir}: {source}")]
+    Cid {
+        /// The state folder.
+        dir: String,
+        /// What the OS said.
+        source: io::Error,
+    },
+    /// The sender thread could not be started.
+    #[error("output: cannot start the sender thread: {0}")]
+    Thread(io::Error),
+}
+
+/// The desired state, as the engine last set it.
+#[derive(Debug, Clone)]
+struct Desired {
+    look: Arc<Look>,
+    /// Bumped by every `set_look`, so the clock sees a new target even if equal.
+    generation: u64,
+    fade: Duration,
+    since: Instant,
+    master: f32,
+    blackout: bool,
+}
+
+/// Counters the clock thread updates; read by [`Output::stats`].
+#[derive(Debug)]
+struct Counters {
+    frames: Vec<AtomicU64>,
+    send_errors: AtomicU64,
+    worst_late_us: AtomicU64,
+}
+
+/// A snapshot of the output's counters, for status and benchmarks.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OutputStats {
+    /// (scene universe, frames sent): a frame counts once however many destinations got it.
+    pub frames: Vec<(u16, u64)>,
+    /// Failed sends (packets) since start, all destinations together.
+    pub send_errors: u64,
+    /// The latest any tick woke after its deadline.
+    pub worst_lateness: Duration,
+}
+
+/// The running output. Dropping it stops the clock like [`Output::shutdown`].
+#[derive(Debug)]
+pub struct Output {
+    desired: watch::Sender<Desired>,
+    counters: Arc<Counters>,
+    universes: Vec<u16>,
+    cid: Uuid,
+    stop: Arc<AtomicBool>,
+    thread: Option<JoinHandle<()>>,
+}
+
+impl Output {
+    /// Validates `config` for `patch`, loads or makes the sACN CID in `state_dir`, binds
+    /// the sockets and starts sending `initial` at once (master 1, no blackout).
+    pub fn start(
+        config: &OutputConfig,
+        patch: Patch,
+        state_dir: &Path,
+        initial: Look,
+    ) -> Result<Output, OutputError> {
+        config
+            .validate(patch.universes())
+            .map_err(OutputError::Config)?;
+        let cid = cid::load_or_create(state_dir).map_err(|source| OutputError::Cid {
+            dir: state_dir.display().to_string(),
+            source,
+        })?;
+        let mut sockets = Sockets::default();
+        let mut sacn = Vec::new();
+        for d in &config.sacn {
+            let target = d.target().map_err(OutputError::Config)?;
+            sacn.push(SacnSink {
+                socket: sockets.bind(d.bind)?,
+                target,
+                port: d.port,
+                source_name: d.source_name.clone(),
+                priority: d.priority,
+                sync_universe: d.sync_universe,
+                sync_sequence: 0,
+                log: Throttle::default(),
+            });
+        }
+        let mut artnet = Vec::new();
+        for d in &config.artnet {
+            let ip = d.address().map_err(OutputError::Config)?;
+            let port_addresses = patch
+                .universes()
+                .iter()
+                .map(|&u| d.port_address(u))
+                .collect::<Option<Vec<_>>>()
+                .ok_or_else(|| OutputError::Config("output.artnet: bad universe_offset".into()))?;
+            artnet.push(ArtnetSink {
+                socket: sockets.bind(d.bind)?,
+                to: SocketAddr::new(ip, d.port),
+                port_addresses,
+                log: Throttle::default(),
+            });
+        }
+
+        let universes = patch.universes().to_vec();
+        let counters = Arc::new(Counters {
+            frames: universes.iter().map(|_| AtomicU64::new(0)).collect(),
+            send_errors: AtomicU64::new(0),
+            worst_late_us: AtomicU64::new(0),
+        });
+        let now = Instant::now();
+        let initial = Arc::new(initial);
+        let (desired, rx) = watch::channel(Desired {
+            look: initial.clone(),
+            generation: 0,
+            fade: Duration::ZERO,
+            since: now,
+            master: 1.0,
+            blackout: false,
+        });
+        let target = patch.unmastered(&initial);
+        let n = universes.len();
+        let stop = Arc::new(AtomicBool::new(false));
+        let clock = Clock {
+            period: Duration::from_secs_f64(1.0 / f64::from(config.rate_hz)),
+            keepalive: config.idle_keepalive,
+            rx,
+            generation: 0,
+            from: target.clone(),
+            target,
+            fade_start: now,
+            fade: Duration::ZERO,
+            master: 1.0,
+            blackout: false,
+            patch,
+            sockets: sockets.list,
+            sacn,
+            artnet,
+            cid,
+            sacn_sequence: vec![0; n],
+            artnet_sequence: vec![0; n],
+            idle: vec![Idle::default(); n],
+            last: vec![[0; SLOTS]; n],
+            counters: counters.clone(),
+            stop: stop.clone(),
+            buf: Vec::with_capacity(700),
+        };
+        let thread = thread::Builder::new()
+            .name("dmx-output".into())
+            .spawn(move || clock.run())
+            .map_err(OutputError::Thread)?;
+        Ok(Output {
+            desired,
+            counters,
+            universes,
+            cid,
+            stop,
+            thread: Some(thread),
+        })
+    }
+
+    /// Crossfades from what is on the wire now to `look` over `fade_s` seconds (0, less or
+    /// not finite: at once; at most an hour). Never blocks on the sender.
+    pub fn set_look(&self, look: Look, fade_s: f32) {
+        let fade = if fade_s.is_finite() && fade_s > 0.0 {
+            Duration::from_secs_f32(fade_s.min(3600.0))
+        } else {
+            Duration::ZERO
+        };
+        let look = Arc::new(look);
+        self.desired.send_modify(|d| {
+            d.look = look;
+            d.generation += 1;
+            d.fade = fade;
+            d.since = Instant::now();
+        });
+    }
+
+    /// Sets the grand master (0..1); applies at once, including during a fade.
+    pub fn set_master(&self, master: f32) {
+        self.desired.send_modify(|d| d.master = master);
+    }
+
+    /// Blackout on: every slot 0 at once. Off: back at once to the (possibly fading) look.
+    pub fn set_blackout(&self, on: bool) {
+        self.desired.send_modify(|d| d.blackout = on);
+    }
+
+    /// The sACN CID this output sends (for status and the `check` command).
+    pub fn cid(&self) -> Uuid {
+        self.cid
+    }
+
+    /// The counters so far.
+    pub fn stats(&self) -> OutputStats {
+        OutputStats {
+            frames: self
+                .universes
+                .iter()
+                .zip(&self.counters.frames)
+                .map(|(&u, n)| (u, n.load(Ordering::Relaxed)))
+                .collect(),
+            send_errors: self.counters.send_errors.load(Ordering::Relaxed),
+            worst_lateness: Duration::from_micros(
+                self.counters.worst_late_us.load(Ordering::Relaxed),
+            ),
+        }
+    }
+
+    /// Orderly stop: the clock finishes its tick, sends three Stream_Terminated packets per
+    /// universe to every sACN destination, and its thread is joined.
+    pub fn shutdown(mut self) {
+        self.stop_clock();
+    }
+
+    fn stop_clock(&mut self) {
+        if let Some(thread) = self.thread.take() {
+            self.stop.store(true, Ordering::Release);
+            thread.thread().unpark();
+            if thread.join().is_err() {
+                tracing::error!("the DMX output thread panicked");
+            }
+        }
+    }
+}
+
+impl Drop for Output {
+    fn drop(&mut self) {
+        self.stop_clock();
+    }
+}
+
+/// Sockets by bind address: destinations with the same fixed `bind` (e.g. port 6454)
+/// share one socket, since binding it twice would fail without SO_REUSEPORT.
+#[derive(Default)]
+struct Sockets {
+    list: Vec<UdpSocket>,
+    fixed: HashMap<SocketAddr, usize>,
+}
+
+impl Sockets {
+    fn bind(&mut self, addr: SocketAddr) -> Result<usize, OutputError> {
+        if addr.port() != 0
+            && let Some(&i) = self.fixed.get(&addr)
+        {
+            return Ok(i);
+        }
+        let err = |source| OutputError::Bind { addr, source };
+        let socket = UdpSocket::bind(addr).map_err(err)?;
+        // Never let a full send buffer stall the clock: such a packet is an error, not a wait.
+        socket.set_nonblocking(true).map_err(err)?;
+        // Art-Net may go to a directed broadcast address.
+        socket.set_broadcast(true).map_err(err)?;
+        self.list.push(socket);
+        if addr.port() != 0 {
+            self.fixed.insert(addr, self.list.len() - 1);
+        }
+        Ok(self.list.len() - 1)
+    }
+}
+
+/// Rate-limits send-error logging to one line per destination per 10 s.
+#[derive(Debug, Default)]
+struct Throttle {
+    last: Option<Instant>,
+    suppressed: u64,
+}
+
+impl Throttle {
+    const EVERY: Duration = Duration::from_secs(10);
+
+    fn error(&mut self, now: Instant, protocol: &str, to: SocketAddr, error: &str) {
+        match self.last {
+            Some(last) if now.duration_since(last) < Self::EVERY => self.suppressed += 1,
+            _ => {
+                tracing::warn!(
+                    protocol,
+                    destination = %to,
+                    error,
+                    suppressed = self.suppressed,
+                    "DMX send failed (further failures to this destination are logged at most every 10 s)"
+                );
+                self.last = Some(now);
+                self.suppressed = 0;
+            }
+        }
+    }
+}
+
+struct SacnSink {
+    socket: usize,
+    target: SacnTarget,
+    port: u16,
+    source_name: String,
+    priority: u8,
+    sync_universe: u16,
+    sync_sequence: u8,
+    log: Throttle,
+}
+
+impl SacnSink {
+    fn address(&self, universe: u16) -> SocketAddr {
+        match self.target {
+            SacnTarget::Unicast(ip) => SocketAddr::new(ip, self.port),
+            SacnTarget::Multicast => SocketAddr::new(
+                IpAddr::V4(Ipv4Addr::new(
+                    239,
+                    255,
+                    (universe >> 8) as u8,
+                    (universe & 0xff) as u8,
+                )),
+                self.port,
+            ),
+        }
+    }
+}
+
+struct ArtnetSink {
+    socket: usize,
+    to: SocketAddr,
+    /// Per patched universe.
+    port_addresses: Vec<u16>,
+    log: Throttle,
+}
+
+/// Keep-alive bookkeeping of one universe.
+#[derive(Debug, Clone, Copy, Default)]
+struct Idle {
+    /// Repeats of unchanged data sent so far (up to 3).
+    repeats: u8,
+    last_sent: Option<Instant>,
+}
+
+/// The sender thread's state.
+struct Clock {
+    period: Duration,
+    keepalive: bool,
+    rx: watch::Receiver<Desired>,
+    generation: u64,
+    from: Frame,
+    target: Frame,
+    fade_start: Instant,
+    fade: Duration,
+    master: f32,
+    blackout: bool,
+    patch: Patch,
+    sockets: Vec<UdpSocket>,
+    sacn: Vec<SacnSink>,
+    artnet: Vec<ArtnetSink>,
+    cid: Uuid,
+    /// Per universe, shared by all sACN destinations (one stream per universe per CID).
+    sacn_sequence: Vec<u8>,
+    /// Per universe, shared by all Art-Net destinations.
+    artnet_sequence: Vec<u8>,
+    idle: Vec<Idle>,
+    /// The bytes last sent per universe.
+    last: Vec<[u8; SLOTS]>,
+    counters: Arc<Counters>,
+    stop: Arc<AtomicBool>,
+    buf: Vec<u8>,
+}
+
+impl Clock {
+    fn run(mut self) {
+        let mut next = Instant::now();
+        let mut first = true;
+        loop {
+            // Wait for the deadline; an unpark from shutdown ends the wait early.
+            loop {
+                if self.stop.load(Ordering::Acquire) {
+                    self.terminate();
+                    return;
+                }
+                let now = Instant::now();
+                if now >= next {
+                    break;
+                }
+                thread::park_timeout(next - now);
+            }
+            let now = Instant::now();
+            let late = now.saturating_duration_since(next);
+            self.counters
+                .worst_late_us
+                .fetch_max(late.as_micros() as u64, Ordering::Relaxed);
+            if late > self.period {
+                // Too late to catch up frame by frame: restart the schedule from now.
+                next = now;
+            }
+            self.tick(now, first);
+            first = false;
+            next += self.period;
+        }
+    }
+
+    /// The unmastered levels at `now`.
+    fn levels_at(&self, now: Instant) -> Frame {
+        let elapsed = now.saturating_duration_since(self.fade_start);
+        if self.fade.is_zero() || elapsed >= self.fade {
+            self.target.clone()
+        } else {
+            let t = elapsed.as_secs_f32() / self.fade.as_secs_f32();
+            Frame::crossfade(&self.from, &self.target, t)
+        }
+    }
+
+    /// Takes in the engine's latest state, if it changed.
+    fn update(&mut self, now: Instant) {
+        if !self.rx.has_changed().unwrap_or(false) {
+            return;
+        }
+        let d = self.rx.borrow_and_update().clone();
+        if d.generation != self.generation {
+            self.from = self.levels_at(now);
+            self.target = self.patch.unmastered(&d.look);
+            self.fade_start = d.since;
+            self.fade = d.fade;
+            self.generation = d.generation;
+        }
+        self.master = d.master;
+        self.blackout = d.blackout;
+    }
+
+    fn tick(&mut self, now: Instant, first: bool) {
+        self.update(now);
+        let wire = if self.blackout {
+            self.patch.blackout()
+        } else {
+            self.patch.mastered(&self.levels_at(now), self.master)
+        };
+        let bytes = self.patch.quantise(&wire);
+        let mut sent_any = false;
+        for (u, data) in bytes.iter().enumerate() {
+            if !self.due(u, data, now, first) {
+                continue;
+            }
+            self.send_universe(u, data, false, now);
+            self.last[u] = *data;
+            self.counters.frames[u].fetch_add(1, Ordering::Relaxed);
+            sent_any = true;
+        }
+        if sent_any {
+            self.send_syncs(now);
+        }
+    }
+
+    /// Whether universe `u` goes out this tick (always, unless keep-alive is idling it).
+    fn due(&mut self, u: usize, data: &[u8; SLOTS], now: Instant, first: bool) -> bool {
+        let idle = &mut self.idle[u];
+        let send = if !self.keepalive || first || *data != self.last[u] {
+            idle.repeats = 0;
+            true
+        } else if idle.repeats < 3 {
+            idle.repeats += 1;
+            true
+        } else {
+            idle.last_sent
+                .is_none_or(|t| now.duration_since(t) >= Duration::from_secs(1))
+        };
+        if send {
+            idle.last_sent = Some(now);
+        }
+        send
+    }
+
+    fn send_universe(&mut self, u: usize, data: &[u8; SLOTS], terminated: bool, now: Instant) {
+        let universe = self.patch.universes()[u];
+        self.sacn_sequence[u] = wire::next_sacn_sequence(self.sacn_sequence[u]);
+        let seq = self.sacn_sequence[u];
+        for sink in &mut self.sacn {
+            let to = sink.address(universe);
+            let src = SacnSource {
+                cid: self.cid,
+                source_name: &sink.source_name,
+                priority: sink.priority,
+                sync_universe: sink.sync_universe,
+            };
+            let result = wire::sacn_data(&src, universe, seq, terminated, data, &mut self.buf)
+                .and_then(|()| {
+                    self.sockets[sink.socket]
+                        .send_to(&self.buf, to)
+                        .map(drop)
+                        .map_err(|e| e.to_string())
+                });
+            if let Err(e) = result {
+                self.counters.send_errors.fetch_add(1, Ordering::Relaxed);
+                sink.log.error(now, "sACN", to, &e);
+            }
+        }
+        if terminated || self.artnet.is_empty() {
+            return;
+        }
+        self.artnet_sequence[u] = wire::next_artnet_sequence(self.artnet_sequence[u]);
+        let seq = self.artnet_sequence[u];
+        for sink in &mut self.artnet {
+            let result = wire::artdmx(sink.port_addresses[u], seq, data).and_then(|packet| {
+                self.sockets[sink.socket]
+                    .send_to(&packet, sink.to)
+                    .map(drop)
+                    .map_err(|e| e.to_string())
+            });
+            if let Err(e) = result {
+                self.counters.send_errors.fetch_add(1, Ordering::Relaxed);
+                sink.log.error(now, "Art-Net", sink.to, &e);
+            }
+        }
+    }
+
+    /// One synchronization packet per sACN destination with a sync universe, after a frame.
+    fn send_syncs(&mut self, now: Instant) {
+        for sink in self.sacn.iter_mut().filter(|s| s.sync_universe != 0) {
+            sink.sync_sequence = wire::next_sacn_sequence(sink.sync_sequence);
+            let to = sink.address(sink.sync_universe);
+            let result = wire::sacn_sync(
+                self.cid,
+                sink.sync_universe,
+                sink.sync_sequence,
+                &mut self.buf,
+            )
+            .and_then(|()| {
+                self.sockets[sink.socket]
+                    .send_to(&self.buf, to)
+                    .map(drop)
+                    .map_err(|e| e.to_string())
+            });
+            if let Err(e) = result {
+                self.counters.send_errors.fetch_add(1, Ordering::Relaxed);
+                sink.log.error(now, "sACN", to, &e);
+            }
+        }
+    }
+
+    /// E1.31 6.2.6: three packets with Stream_Terminated per universe, so receivers
+    /// release the universe at once instead of holding the last look for 2.5 s.
+    fn terminate(&mut self) {
+        let now = Instant::now();
+        for _ in 0..3 {
+            for u in 0..self.last.len() {
+                let data = self.last[u];
+                self.send_universe(u, &data, true, now);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn send_errors_are_logged_once_per_ten_seconds() {
+        let mut log = Throttle::default();
+        let to: SocketAddr = "127.0.0.1:6454".parse().expect("addr");
+        let t0 = Instant::now();
+        log.error(t0, "Art-Net", to, "first");
+        log.error(t0 + Duration::from_secs(1), "Art-Net", to, "quiet");
+        log.error(t0 + Duration::from_secs(9), "Art-Net", to, "quiet");
+        assert_eq!((log.last, log.suppressed), (Some(t0), 2));
+        let t1 = t0 + Duration::from_secs(10);
+        log.error(t1, "Art-Net", to, "again");
+        assert_eq!((log.last, log.suppressed), (Some(t1), 0));
+    }
+}
