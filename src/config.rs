@@ -1,0 +1,263 @@
+//! `config/visobjd.toml` (config.md): every key has a default, unknown keys are an error
+//! naming the key and line, and relative paths are relative to the config file's folder.
+
+use std::net::{IpAddr, SocketAddr};
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+
+use crate::output::OutputConfig;
+use crate::scene::describe_toml_error;
+
+/// The whole configuration, paths resolved.
+#[derive(Debug, Clone)]
+pub struct Config {
+    /// The file it came from (for messages).
+    pub path: PathBuf,
+    /// The scene folder.
+    pub scene: PathBuf,
+    /// The only folder objective images are read from.
+    pub references: PathBuf,
+    /// Saved looks, the live look, the sACN CID.
+    pub state_dir: PathBuf,
+    /// OSC listeners and access.
+    pub osc: OscConfig,
+    /// DMX outputs.
+    pub output: OutputConfig,
+    /// Generation defaults.
+    pub generate: GenerateConfig,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields, default)]
+struct ConfigFile {
+    scene: PathBuf,
+    references: PathBuf,
+    state_dir: PathBuf,
+    osc: OscConfig,
+    output: OutputConfig,
+    generate: GenerateConfig,
+}
+
+impl Default for ConfigFile {
+    fn default() -> Self {
+        ConfigFile {
+            scene: "../scenes/demo".into(),
+            references: "../scenes/demo/refs".into(),
+            state_dir: "../state".into(),
+            osc: OscConfig::default(),
+            output: OutputConfig::default(),
+            generate: GenerateConfig::default(),
+        }
+    }
+}
+
+/// The `[osc]` section.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct OscConfig {
+    /// UDP listen address; empty turns UDP off.
+    pub udp: String,
+    /// TCP listen address; empty turns TCP off.
+    pub tcp: String,
+    /// 0: reply to the sender's port; N: to the sender's address at port N.
+    pub reply_port: u16,
+    /// Senders allowed (addresses or CIDR blocks); empty: loopback only.
+    pub allow: Vec<String>,
+}
+
+impl Default for OscConfig {
+    fn default() -> Self {
+        OscConfig {
+            udp: "127.0.0.1:8000".into(),
+            tcp: "127.0.0.1:8000".into(),
+            reply_port: 0,
+            allow: Vec::new(),
+        }
+    }
+}
+
+/// The `[generate]` section.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct GenerateConfig {
+    /// Candidates per generate (N), 1..=1000.
+    pub count: u32,
+    /// Gallery entries at most (c), 1..=64.
+    pub clusters: u32,
+    /// Key-light spread, fraction of full.
+    pub sigma_key: f32,
+    /// Fill-light spread, fraction of full.
+    pub sigma_fill: f32,
+    /// Colours per palette, 1..=16.
+    pub palette: u32,
+}
+
+impl Default for GenerateConfig {
+    fn default() -> Self {
+        GenerateConfig {
+            count: 100,
+            clusters: 12,
+            sigma_key: 0.05,
+            sigma_fill: 0.10,
+            palette: 5,
+        }
+    }
+}
+
+/// An address or CIDR block of the sender allow-list.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Cidr {
+    /// Network address.
+    pub addr: IpAddr,
+    /// Prefix length.
+    pub prefix: u8,
+}
+
+impl Cidr {
+    /// Parses `10.0.0.5`, `10.0.0.0/24`, `::1` or `fd00::/8`.
+    pub fn parse(s: &str) -> Result<Cidr, String> {
+        let (addr, prefix) = match s.split_once('/') {
+            Some((a, p)) => (a, Some(p)),
+            None => (s, None),
+        };
+        let addr: IpAddr = addr
+            .trim()
+            .parse()
+            .map_err(|_| format!("`{s}` is not an IP address or CIDR block"))?;
+        let max = if addr.is_ipv4() { 32 } else { 128 };
+        let prefix = match prefix {
+            Some(p) => p
+                .trim()
+                .parse::<u8>()
+                .ok()
+                .filter(|&p| p <= max)
+                .ok_or_else(|| format!("`{s}`: prefix length must be 0..={max}"))?,
+            None => max,
+        };
+        Ok(Cidr { addr, prefix })
+    }
+
+    /// Whether `ip` is inside the block (IPv4-mapped IPv6 senders match IPv4 blocks).
+    pub fn contains(&self, ip: IpAddr) -> bool {
+        let ip = match ip {
+            IpAddr::V6(v6) => v6.to_ipv4_mapped().map_or(ip, IpAddr::V4),
+            v4 => v4,
+        };
+        match (self.addr, ip) {
+            (IpAddr::V4(net), IpAddr::V4(a)) => {
+                let mask = u32::MAX.checked_shl(32 - u32::from(self.prefix)).unwrap_or(0);
+                u32::from(net) & mask == u32::from(a) & mask
+            }
+            (IpAddr::V6(net), IpAddr::V6(a)) => {
+                let mask = u128::MAX.checked_shl(128 - u32::from(self.prefix)).unwrap_or(0);
+                u128::from(net) & mask == u128::from(a) & mask
+            }
+            _ => false,
+        }
+    }
+}
+
+impl Config {
+    /// Reads and validates a config file.
+    pub fn load(path: &Path) -> Result<Config, String> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| format!("{}: cannot read it: {e}", path.display()))?;
+        Config::parse(path, &text)
+    }
+
+    /// Validates config text; `path` names the file and anchors relative paths.
+    pub fn parse(path: &Path, text: &str) -> Result<Config, String> {
+        let at = |m: String| format!("{}: {m}", path.display());
+        let file: ConfigFile =
+            toml::from_str(text).map_err(|e| at(describe_toml_error(text, &e)))?;
+        let dir = path.parent().unwrap_or(Path::new("."));
+        let resolve = |p: &Path| {
+            if p.is_absolute() {
+                p.to_path_buf()
+            } else {
+                dir.join(p)
+            }
+        };
+        for (key, value) in [("osc.udp", &file.osc.udp), ("osc.tcp", &file.osc.tcp)] {
+            if !value.is_empty() && value.parse::<SocketAddr>().is_err() {
+                return Err(at(format!(
+                    "{key}: `{value}` is not an address:port such as 127.0.0.1:8000"
+                )));
+            }
+        }
+        for a in &file.osc.allow {
+            Cidr::parse(a).map_err(|e| at(format!("osc.allow: {e}")))?;
+        }
+        let g = &file.generate;
+        let checks = [
+            ((1..=1000).contains(&g.count), "generate.count must be 1..=1000"),
+            ((1..=64).contains(&g.clusters), "generate.clusters must be 1..=64"),
+            ((1..=16).contains(&g.palette), "generate.palette must be 1..=16"),
+            (
+                (0.0..=1.0).contains(&g.sigma_key),
+                "generate.sigma_key must be 0..=1",
+            ),
+            (
+                (0.0..=1.0).contains(&g.sigma_fill),
+                "generate.sigma_fill must be 0..=1",
+            ),
+        ];
+        if let Some((_, m)) = checks.iter().find(|(ok, _)| !ok) {
+            return Err(at((*m).to_string()));
+        }
+        Ok(Config {
+            path: path.to_path_buf(),
+            scene: resolve(&file.scene),
+            references: resolve(&file.references),
+            state_dir: resolve(&file.state_dir),
+            osc: file.osc,
+            output: file.output,
+            generate: file.generate,
+        })
+    }
+
+    /// The allow-list, parsed (validated at load).
+    pub fn allow_list(&self) -> Vec<Cidr> {
+        self.osc
+            .allow
+            .iter()
+            .filter_map(|a| Cidr::parse(a).ok())
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn empty_config_is_the_demo_on_loopback() {
+        let c = Config::parse(Path::new("config/visobjd.toml"), "").unwrap();
+        assert_eq!(c.scene, Path::new("config/../scenes/demo"));
+        assert_eq!(c.osc.udp, "127.0.0.1:8000");
+        assert_eq!(c.generate.count, 100);
+        assert_eq!(c.output.rate_hz, 44);
+    }
+
+    #[test]
+    fn unknown_keys_name_the_key_and_line() {
+        let e = Config::parse(Path::new("c.toml"), "scene = \"x\"\n[osc]\nudpp = \"1\"\n")
+            .unwrap_err();
+        assert!(e.contains("line 3") && e.contains("udpp"), "{e}");
+    }
+
+    #[test]
+    fn cidr_blocks_match_v4_v6_and_mapped() {
+        let net = Cidr::parse("10.1.0.0/16").unwrap();
+        assert!(net.contains("10.1.200.3".parse().unwrap()));
+        assert!(!net.contains("10.2.0.1".parse().unwrap()));
+        assert!(net.contains("::ffff:10.1.0.9".parse().unwrap()));
+        let v6 = Cidr::parse("fd00::/8").unwrap();
+        assert!(v6.contains("fd12::1".parse().unwrap()));
+        assert!(!v6.contains("fe80::1".parse().unwrap()));
+        assert!(Cidr::parse("0.0.0.0/0").unwrap().contains("8.8.8.8".parse().unwrap()));
+        assert!(Cidr::parse("10.0.0.0/33").is_err());
+        assert!(Cidr::parse("bogus").is_err());
+    }
+}
