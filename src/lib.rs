@@ -3,6 +3,7 @@
 pub mod basis;
 pub mod cli;
 pub mod color;
+pub mod config;
 pub mod dmx;
 pub mod gallery;
 pub mod look;
