@@ -146,11 +146,15 @@ impl Cidr {
         };
         match (self.addr, ip) {
             (IpAddr::V4(net), IpAddr::V4(a)) => {
-                let mask = u32::MAX.checked_shl(32 - u32::from(self.prefix)).unwrap_or(0);
+                let mask = u32::MAX
+                    .checked_shl(32 - u32::from(self.prefix))
+                    .unwrap_or(0);
                 u32::from(net) & mask == u32::from(a) & mask
             }
             (IpAddr::V6(net), IpAddr::V6(a)) => {
-                let mask = u128::MAX.checked_shl(128 - u32::from(self.prefix)).unwrap_or(0);
+                let mask = u128::MAX
+                    .checked_shl(128 - u32::from(self.prefix))
+                    .unwrap_or(0);
                 u128::from(net) & mask == u128::from(a) & mask
             }
             _ => false,
@@ -191,9 +195,18 @@ impl Config {
         }
         let g = &file.generate;
         let checks = [
-            ((1..=1000).contains(&g.count), "generate.count must be 1..=1000"),
-            ((1..=64).contains(&g.clusters), "generate.clusters must be 1..=64"),
-            ((1..=16).contains(&g.palette), "generate.palette must be 1..=16"),
+            (
+                (1..=1000).contains(&g.count),
+                "generate.count must be 1..=1000",
+            ),
+            (
+                (1..=64).contains(&g.clusters),
+                "generate.clusters must be 1..=64",
+            ),
+            (
+                (1..=16).contains(&g.palette),
+                "generate.palette must be 1..=16",
+            ),
             (
                 (0.0..=1.0).contains(&g.sigma_key),
                 "generate.sigma_key must be 0..=1",
@@ -242,8 +255,8 @@ mod tests {
 
     #[test]
     fn unknown_keys_name_the_key_and_line() {
-        let e = Config::parse(Path::new("c.toml"), "scene = \"x\"\n[osc]\nudpp = \"1\"\n")
-            .unwrap_err();
+        let e =
+            Config::parse(Path::new("c.toml"), "scene = \"x\"\n[osc]\nudpp = \"1\"\n").unwrap_err();
         assert!(e.contains("line 3") && e.contains("udpp"), "{e}");
     }
 
@@ -256,7 +269,11 @@ mod tests {
         let v6 = Cidr::parse("fd00::/8").unwrap();
         assert!(v6.contains("fd12::1".parse().unwrap()));
         assert!(!v6.contains("fe80::1".parse().unwrap()));
-        assert!(Cidr::parse("0.0.0.0/0").unwrap().contains("8.8.8.8".parse().unwrap()));
+        assert!(
+            Cidr::parse("0.0.0.0/0")
+                .unwrap()
+                .contains("8.8.8.8".parse().unwrap())
+        );
         assert!(Cidr::parse("10.0.0.0/33").is_err());
         assert!(Cidr::parse("bogus").is_err());
     }

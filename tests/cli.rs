@@ -334,3 +334,43 @@ fn bad_references_and_arguments_fail_with_one_line() {
     );
     assert!(!out.exists(), "nothing written on failure");
 }
+
+#[test]
+fn check_summarises_a_clean_scene_and_refuses_a_broken_one() {
+    let dir = temp_dir("cli-check");
+    stripes(&dir.join("scene"), 6, true);
+    std::fs::create_dir_all(dir.join("config")).unwrap();
+    let config = dir.join("config/visobjd.toml");
+    std::fs::write(&config, "scene = \"../scene\"\n[[output.sacn]]\n").unwrap();
+    let out = run(&["check", "--config", s(&config)]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("6 in 6 groups, channels 1-6"), "{text}");
+    assert!(text.contains("dimmer x3, irgb x3"), "{text}");
+    assert!(text.contains("universe 1: 15/512 slots"), "{text}");
+
+    std::fs::write(&config, "scene = \"../scene\"\n[output]\nrate_hz = 100\n").unwrap();
+    fails_with(&run(&["check", "--config", s(&config)]), "output.rate_hz");
+    std::fs::write(&config, "scene = \"../scene\"\nsecne = 1\n").unwrap();
+    fails_with(&run(&["check", "--config", s(&config)]), "line 2");
+    std::fs::write(&config, "scene = \"../nowhere\"\n").unwrap();
+    fails_with(
+        &run(&["check", "--config", s(&config)]),
+        "nowhere/scene.toml",
+    );
+    let toml = std::fs::read_to_string(dir.join("scene/scene.toml")).unwrap();
+    std::fs::write(
+        dir.join("scene/scene.toml"),
+        toml.replacen("channel = 2", "channel = 1", 1),
+    )
+    .unwrap();
+    std::fs::write(&config, "scene = \"../scene\"\n").unwrap();
+    fails_with(
+        &run(&["check", "--config", s(&config)]),
+        "channel 1 is used by two lights",
+    );
+}

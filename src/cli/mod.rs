@@ -1,5 +1,6 @@
 //! The command line (cli.md): argument parsing and one module per subcommand.
 
+mod check;
 mod gallery;
 mod render;
 
@@ -19,6 +20,8 @@ enum Command {
     Gallery(gallery::Args),
     /// Renders one look file to a PNG.
     Render(render::Args),
+    /// Validates the config and its scene and prints a summary.
+    Check(check::Args),
 }
 
 /// Runs the command line; returns the process exit code. User mistakes print one line on
@@ -36,6 +39,7 @@ pub fn main() -> std::process::ExitCode {
     let result = match cli.command {
         Command::Gallery(args) => gallery::run(args, sub),
         Command::Render(args) => render::run(args),
+        Command::Check(args) => check::run(args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

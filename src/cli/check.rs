@@ -1,0 +1,124 @@
+//! `visobjd check`: validates config and scene and prints a one-screen summary a
+//! technician can read on a small booth screen.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+use crate::config::Config;
+use crate::dmx::Patch;
+use crate::stage::{Stage, THUMB_WIDTH};
+
+/// Arguments of `check`.
+#[derive(clap::Args)]
+pub struct Args {
+    /// The config file.
+    #[arg(long, default_value = "config/visobjd.toml")]
+    config: PathBuf,
+}
+
+/// Runs `check`: the first problem found is the error; otherwise the summary.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let config = Config::load(&args.config).map_err(anyhow::Error::msg)?;
+    let stage = Stage::load(&config.scene, THUMB_WIDTH)?;
+    let scene = &stage.scene;
+    let patch = Patch::new(scene);
+    config
+        .output
+        .validate(patch.universes())
+        .map_err(|e| anyhow::anyhow!("{}: {e}", config.path.display()))?;
+
+    let mut profiles: BTreeMap<&str, usize> = BTreeMap::new();
+    for l in 0..scene.lights.len() {
+        *profiles.entry(scene.profile(l).name.as_str()).or_default() += 1;
+    }
+    let mut used: BTreeMap<u16, usize> = BTreeMap::new();
+    for (l, light) in scene.lights.iter().enumerate() {
+        *used.entry(light.universe).or_default() += scene.profile(l).footprint();
+    }
+    let refs = std::fs::read_dir(&config.references)
+        .map(|d| {
+            d.filter_map(Result::ok)
+                .filter(|e| e.path().is_file())
+                .count()
+        })
+        .map_or_else(
+            |e| format!("{} is not readable ({e})", config.references.display()),
+            |n| format!("{n} files in {}", config.references.display()),
+        );
+    let bytes = stage.proxy.bytes() + stage.thumbs.bytes();
+    let out = &config.output;
+    let line = |k: &str, v: String| println!("{k:<9}{v}");
+    line("config", format!("{} ok", config.path.display()));
+    line(
+        "scene",
+        format!("{} ({})", scene.name, config.scene.display()),
+    );
+    line(
+        "lights",
+        format!(
+            "{} in {} groups, {}",
+            scene.lights.len(),
+            scene.groups.len(),
+            scene.channel_range()
+        ),
+    );
+    line(
+        "profiles",
+        profiles
+            .iter()
+            .map(|(p, n)| format!("{p} x{n}"))
+            .collect::<Vec<_>>()
+            .join(", "),
+    );
+    line(
+        "dmx",
+        used.iter()
+            .map(|(u, n)| format!("universe {u}: {n}/512 slots"))
+            .collect::<Vec<_>>()
+            .join(", "),
+    );
+    line(
+        "images",
+        format!(
+            "{} basis images, all readable; kept at {}x{} and {}x{}",
+            scene.lights.len(),
+            stage.thumbs.width,
+            stage.thumbs.height,
+            stage.proxy.width,
+            stage.proxy.height
+        ),
+    );
+    line(
+        "memory",
+        format!("about {} MB of basis images", bytes.div_ceil(1 << 20)),
+    );
+    line("refs", refs);
+    line(
+        "osc",
+        format!(
+            "udp {}, tcp {}, allow {}",
+            or_off(&config.osc.udp),
+            or_off(&config.osc.tcp),
+            if config.osc.allow.is_empty() {
+                "loopback only".to_string()
+            } else {
+                config.osc.allow.join(" ")
+            }
+        ),
+    );
+    line(
+        "output",
+        format!(
+            "{} sACN and {} Art-Net destinations at {} Hz, fade {} s",
+            out.sacn.len(),
+            out.artnet.len(),
+            out.rate_hz,
+            out.fade_s
+        ),
+    );
+    Ok(())
+}
+
+fn or_off(addr: &str) -> &str {
+    if addr.is_empty() { "off" } else { addr }
+}
