@@ -15,12 +15,12 @@ use crate::dmx::profile::Profile;
 #[derive(Debug, thiserror::Error)]
 pub enum SceneError {
     /// The file could not be read.
-    #[error("{path}: {source}")]
+    #[error("{path}: cannot read it: {error}")]
     Io {
         /// The file.
         path: PathBuf,
         /// What the OS said.
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// TOML syntax or schema problem (the message carries line and key).
     #[error("{path}: {message}")]
@@ -136,9 +136,9 @@ impl Scene {
     /// Reads and validates `DIR/scene.toml` (images are not read).
     pub fn load(dir: &Path) -> Result<Scene, SceneError> {
         let path = dir.join("scene.toml");
-        let text = std::fs::read_to_string(&path).map_err(|source| SceneError::Io {
+        let text = std::fs::read_to_string(&path).map_err(|error| SceneError::Io {
             path: path.clone(),
-            source,
+            error,
         })?;
         Scene::parse(dir, &text)
     }
