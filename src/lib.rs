@@ -14,4 +14,5 @@ pub mod sampler;
 pub mod scene;
 pub mod sheet;
 pub mod stage;
+pub mod state;
 pub mod targeting;

@@ -2,9 +2,8 @@
 //! (and their priority merges) see the same source after a restart.
 
 use std::fs;
-use std::io::{self, Write};
+use std::io;
 use std::path::Path;
-use std::time::{SystemTime, UNIX_EPOCH};
 
 use uuid::Uuid;
 
@@ -22,33 +21,16 @@ pub(crate) fn load_or_create(state_dir: &Path) -> io::Result<Uuid> {
             if let Some(cid) = parsed {
                 return Ok(cid);
             }
-            let secs = SystemTime::now()
-                .duration_since(UNIX_EPOCH)
-                .map_or(0, |d| d.as_secs());
-            let aside = state_dir.join(format!("cid.corrupt-{secs}"));
-            fs::rename(&path, &aside)?;
-            tracing::error!(
-                file = %path.display(),
-                moved_to = %aside.display(),
-                "the sACN CID file does not hold a UUID; moved it aside and made a new CID (receivers will see a new source)"
-            );
+            crate::state::keep_aside(
+                &path,
+                "the sACN CID file does not hold a UUID; a new CID is made (receivers will see a new source)",
+            )?;
         }
         Err(e) if e.kind() == io::ErrorKind::NotFound => {}
         Err(e) => return Err(e),
     }
     let cid = Uuid::new_v4();
-    fs::create_dir_all(state_dir)?;
-    let tmp = state_dir.join(format!(".cid.tmp-{}", std::process::id()));
-    {
-        let mut f = fs::File::create(&tmp)?;
-        writeln!(f, "{}", cid.hyphenated())?;
-        f.sync_all()?;
-    }
-    fs::rename(&tmp, &path)?;
-    // Make the rename itself durable; a failure here only risks a new CID after a crash.
-    if let Err(e) = fs::File::open(state_dir).and_then(|d| d.sync_all()) {
-        tracing::warn!(dir = %state_dir.display(), error = %e, "could not sync the state folder after writing the CID");
-    }
+    crate::state::write_atomic(&path, format!("{}\n", cid.hyphenated()).as_bytes())?;
     Ok(cid)
 }
 

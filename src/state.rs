@@ -1,0 +1,145 @@
+//! Files in `state_dir` that must survive crashes and power cuts: written atomically
+//! (temp file, fsync, rename, fsync of the folder), so a reader only ever sees the old or
+//! the new version; a file that does not parse is moved aside, never deleted.
+
+use std::fs::{self, File};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use serde::Serialize;
+use serde::de::DeserializeOwned;
+
+/// Writes `bytes` to `path` atomically.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    let dir = path.parent().unwrap_or(Path::new("."));
+    fs::create_dir_all(dir)?;
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    // Unique per process and call, so concurrent writers never share a temp file.
+    static COUNTER: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let n = COUNTER.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let tmp = dir.join(format!(".{name}.{}.{n}.tmp", std::process::id()));
+    let result = (|| {
+        let mut f = File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+        drop(f);
+        fs::rename(&tmp, path)?;
+        // The rename itself is durable only once the folder is synced.
+        File::open(dir)?.sync_all()
+    })();
+    if result.is_err() {
+        let _ = fs::remove_file(&tmp);
+    }
+    result
+}
+
+/// Serialises `value` as pretty JSON and writes it atomically.
+pub fn save_json<T: Serialize>(path: &Path, value: &T) -> std::io::Result<()> {
+    let text = serde_json::to_vec_pretty(value).map_err(std::io::Error::other)?;
+    write_atomic(path, &text)
+}
+
+/// What reading a state file found.
+#[derive(Debug)]
+pub enum Loaded<T> {
+    /// The file parsed.
+    Ok(T),
+    /// There is no file (a first start).
+    Missing,
+    /// The file was unreadable or corrupt and was moved to the returned path.
+    MovedAside(PathBuf, String),
+}
+
+/// Reads a JSON state file. A file that does not parse is renamed to
+/// `NAME.corrupt-<unix seconds>` beside it, with the error logged, so nothing is lost and
+/// the daemon can start.
+pub fn load_json<T: DeserializeOwned>(path: &Path) -> Loaded<T> {
+    let bytes = match fs::read(path) {
+        Ok(b) => b,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Loaded::Missing,
+        Err(e) => return move_aside(path, format!("cannot read it: {e}")),
+    };
+    match serde_json::from_slice(&bytes) {
+        Ok(v) => Loaded::Ok(v),
+        Err(e) => move_aside(path, format!("it is corrupt: {e}")),
+    }
+}
+
+fn move_aside<T>(path: &Path, why: String) -> Loaded<T> {
+    match keep_aside(path, &why) {
+        Ok(aside) => Loaded::MovedAside(aside, why),
+        Err(e) => {
+            tracing::error!(
+                "{}: {why}; could not move it aside ({e}), started without it",
+                path.display()
+            );
+            Loaded::MovedAside(path.to_path_buf(), why)
+        }
+    }
+}
+
+/// Renames a bad state file to `NAME.corrupt-<unix seconds>` beside it and logs why, so a
+/// person can inspect or restore it; returns the new path.
+pub fn keep_aside(path: &Path, why: &str) -> std::io::Result<PathBuf> {
+    let secs = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    let mut aside = path.as_os_str().to_owned();
+    aside.push(format!(".corrupt-{secs}"));
+    let aside = PathBuf::from(aside);
+    fs::rename(path, &aside)?;
+    tracing::error!(
+        "{}: {why}; kept it as {} and carried on without it",
+        path.display(),
+        aside.display()
+    );
+    Ok(aside)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn dir(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("visobjd-state-{}-{name}", std::process::id()));
+        let _ = fs::remove_dir_all(&d);
+        fs::create_dir_all(&d).unwrap();
+        d
+    }
+
+    #[test]
+    fn atomic_write_replaces_and_leaves_no_temp_files() {
+        let d = dir("atomic");
+        let p = d.join("live.json");
+        save_json(&p, &vec![1, 2, 3]).unwrap();
+        save_json(&p, &vec![4, 5]).unwrap();
+        match load_json::<Vec<u32>>(&p) {
+            Loaded::Ok(v) => assert_eq!(v, vec![4, 5]),
+            other => panic!("{other:?}"),
+        }
+        let names: Vec<_> = fs::read_dir(&d)
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        assert_eq!(names, vec![std::ffi::OsString::from("live.json")]);
+    }
+
+    #[test]
+    fn missing_is_missing_and_corrupt_is_kept_aside() {
+        let d = dir("corrupt");
+        let p = d.join("looks.json");
+        assert!(matches!(load_json::<Vec<u32>>(&p), Loaded::Missing));
+        fs::write(&p, b"{ not json").unwrap();
+        match load_json::<Vec<u32>>(&p) {
+            Loaded::MovedAside(aside, why) => {
+                assert!(why.contains("corrupt"), "{why}");
+                assert_eq!(fs::read(&aside).unwrap(), b"{ not json");
+                assert!(!p.exists());
+            }
+            other => panic!("{other:?}"),
+        }
+    }
+}
