@@ -36,20 +36,20 @@ pub enum OutputError {
     #[error("{0}")]
     Config(String),
     /// A `bind` address could not be bound.
-    #[error("output: cannot bind {addr}: {source}")]
+    #[error("output: cannot bind {addr}: {error}")]
     Bind {
         /// The configured `bind`.
         addr: SocketAddr,
         /// What the OS said.
-        source: io::Error,
+        error: io::Error,
     },
     /// The sACN CID in `state_dir` could not be read or written.
-    #[error("output: sACN CID in {dir}: {source}")]
+    #[error("output: sACN CID in {dir}: {error}")]
     Cid {
         /// The state folder.
         dir: String,
         /// What the OS said.
-        source: io::Error,
+        error: io::Error,
     },
     /// The sender thread could not be started.
     #[error("output: cannot start the sender thread: {0}")]
@@ -110,9 +110,9 @@ impl Output {
         config
             .validate(patch.universes())
             .map_err(OutputError::Config)?;
-        let cid = cid::load_or_create(state_dir).map_err(|source| OutputError::Cid {
+        let cid = cid::load_or_create(state_dir).map_err(|error| OutputError::Cid {
             dir: state_dir.display().to_string(),
-            source,
+            error,
         })?;
         let mut sockets = Sockets::default();
         let mut sacn = Vec::new();
@@ -289,7 +289,7 @@ impl Sockets {
         {
             return Ok(i);
         }
-        let err = |source| OutputError::Bind { addr, source };
+        let err = |error| OutputError::Bind { addr, error };
         let socket = UdpSocket::bind(addr).map_err(err)?;
         // Never let a full send buffer stall the clock: such a packet is an error, not a wait.
         socket.set_nonblocking(true).map_err(err)?;
