@@ -1,1 +1,3 @@
 //! visobjd: turns a lighting designer's reference images into stage lighting looks.
+
+pub mod synth;
