@@ -254,6 +254,15 @@ fn bad_rigs_give_one_clear_line() {
     let msg = rig_error(&twice);
     assert!(msg.contains("slot 1 is already used by light 1"), "{msg}");
 
+    let msg = rig_error(&format!(
+        "{BASE}{}",
+        lamp.replace("address = 1", "address = 4294967295")
+    ));
+    assert!(msg.contains("does not fit in 1..=512"), "{msg}");
+
+    let msg = rig_error(&BASE.replace("width = 32", "width = 100000"));
+    assert!(msg.starts_with("image size 100000x18"), "{msg}");
+
     let msg = rig_error(&format!("{BASE}{}", lamp.replace("dimmer", "dimmr")));
     assert!(msg.contains("unknown profile `dimmr`"), "{msg}");
 }

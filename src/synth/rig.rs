@@ -185,8 +185,10 @@ pub(crate) fn footprint(profile: &str) -> Option<u32> {
     }
 }
 
-/// Largest image side accepted; guards against a typo allocating gigabytes.
+/// Largest image accepted (UHD): the camera's view takes about 160 bytes a pixel, so this
+/// keeps a typo from allocating gigabytes.
 const MAX_SIDE: u32 = 8192;
+const MAX_PIXELS: u64 = 3840 * 2160;
 
 impl Rig {
     /// Parses and checks a rig file's text, so that rendering never meets a degenerate value.
@@ -206,10 +208,15 @@ impl Rig {
 
     fn validate(&self) -> Result<(), SynthError> {
         let bad = |m: String| Err(SynthError::Invalid(m));
-        if self.width == 0 || self.height == 0 || self.width > MAX_SIDE || self.height > MAX_SIDE {
+        let (w, h) = (self.width, self.height);
+        if w == 0
+            || h == 0
+            || w > MAX_SIDE
+            || h > MAX_SIDE
+            || u64::from(w) * u64::from(h) > MAX_PIXELS
+        {
             return bad(format!(
-                "image size {}x{} is outside 1..={MAX_SIDE}",
-                self.width, self.height
+                "image size {w}x{h}: sides must be 1..={MAX_SIDE} and the area at most 3840x2160"
             ));
         }
         finite("exposure", &[self.exposure])?;
@@ -302,7 +309,7 @@ impl Rig {
                     l.universe
                 ));
             }
-            if l.address == 0 || l.address + fp - 1 > 512 {
+            if l.address == 0 || l.address > 513 - fp {
                 return bad(format!(
                     "{what}: address {} with a {fp}-slot footprint does not fit in 1..=512",
                     l.address
