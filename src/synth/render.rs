@@ -6,7 +6,7 @@ use std::f32::consts::PI;
 use rayon::prelude::*;
 
 use super::rig::{Light, Rig};
-use super::trace::{Geometry, Surface, V3, basis};
+use super::trace::{Geometry, Surface, V3, orthonormal};
 
 /// Subpixel sample positions (rotated grid): cheap antialiasing, identical on every run.
 const SUBPIXELS: [(f32, f32); 4] = [
@@ -184,7 +184,7 @@ impl Renderer {
     /// Shoots the beam as equal-solid-angle rays (a Fibonacci spiral over the field cone) and
     /// keeps a reflected-flux virtual light where each lands.
     fn bounce_lights(&self, spot: &Spot) -> Vec<Vpl> {
-        let (u, w) = basis(spot.axis);
+        let (u, w) = orthonormal(spot.axis);
         let n = BOUNCE_SAMPLES;
         let cap = 1.0 - spot.cos_field;
         let d_omega = 2.0 * PI * cap / n as f32;

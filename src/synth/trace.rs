@@ -61,7 +61,7 @@ impl Neg for V3 {
 }
 
 /// Two unit vectors perpendicular to `n` and to each other.
-pub(crate) fn basis(n: V3) -> (V3, V3) {
+pub(crate) fn orthonormal(n: V3) -> (V3, V3) {
     let a = if n.x.abs() < 0.9 {
         V3::new(1.0, 0.0, 0.0)
     } else {
