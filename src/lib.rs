@@ -15,4 +15,5 @@ pub mod scene;
 pub mod sheet;
 pub mod stage;
 pub mod state;
+pub mod synth;
 pub mod targeting;
