@@ -31,10 +31,17 @@ fn check_reports_the_shipped_config_clean() {
         .args(["check", "--config", config])
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.contains("44 in "), "{text}");
-    assert!(text.contains("universe 1:") && text.contains("universe 2:"), "{text}");
+    assert!(
+        text.contains("universe 1:") && text.contains("universe 2:"),
+        "{text}"
+    );
 }
 
 #[test]
@@ -72,9 +79,11 @@ fn gallery_brightness_follows_the_references() {
         );
         let reps: Vec<&Look> = g.entries.iter().map(|e| &g.candidates[e[0]]).collect();
         let thumbs = stage.thumbnails(&reps);
-        let gallery_l =
-            thumbs.iter().map(mean_lightness).sum::<f32>() / thumbs.len() as f32;
-        println!("{:>40}  reference L* {reference_l:5.1}  gallery L* {gallery_l:5.1}", path.display());
+        let gallery_l = thumbs.iter().map(mean_lightness).sum::<f32>() / thumbs.len() as f32;
+        println!(
+            "{:>40}  reference L* {reference_l:5.1}  gallery L* {gallery_l:5.1}",
+            path.display()
+        );
         rows.push((reference_l, gallery_l));
     }
     // Every pair of references that differ clearly in brightness gives galleries in the
@@ -82,7 +91,14 @@ fn gallery_brightness_follows_the_references() {
     for a in &rows {
         for b in &rows {
             if a.0 > b.0 + 10.0 {
-                assert!(a.1 > b.1, "reference L* {} > {} but gallery {} <= {}", a.0, b.0, a.1, b.1);
+                assert!(
+                    a.1 > b.1,
+                    "reference L* {} > {} but gallery {} <= {}",
+                    a.0,
+                    b.0,
+                    a.1,
+                    b.1
+                );
             }
         }
     }

@@ -22,6 +22,15 @@ enum Command {
     Render(render::Args),
     /// Validates the config and its scene and prints a summary.
     Check(check::Args),
+    /// Renders a virtual stage's basis images and scene.toml from a rig description.
+    Synth {
+        /// The rig description (TOML).
+        #[arg(long)]
+        rig: std::path::PathBuf,
+        /// The scene folder to write.
+        #[arg(long)]
+        out: std::path::PathBuf,
+    },
 }
 
 /// Runs the command line; returns the process exit code. User mistakes print one line on
@@ -40,6 +49,18 @@ pub fn main() -> std::process::ExitCode {
         Command::Gallery(args) => gallery::run(args, sub),
         Command::Render(args) => render::run(args),
         Command::Check(args) => check::run(args),
+        Command::Synth { rig, out } => crate::synth::synth(&rig, &out)
+            .map(|r| {
+                println!(
+                    "synth: {} lights at {}x{} in {:.1} s -> {}",
+                    r.lights,
+                    r.width,
+                    r.height,
+                    r.seconds,
+                    out.display()
+                )
+            })
+            .map_err(anyhow::Error::from),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

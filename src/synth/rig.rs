@@ -173,18 +173,6 @@ pub struct Light {
     pub gel: Option<[f32; 3]>,
 }
 
-/// DMX footprint of a built-in profile, or `None` for an unknown name.
-pub(crate) fn footprint(profile: &str) -> Option<u32> {
-    match profile {
-        "dimmer" => Some(1),
-        "dimmer16" => Some(2),
-        "rgb" => Some(3),
-        "irgb" | "rgbw" | "rgba" => Some(4),
-        "irgbw" => Some(5),
-        _ => None,
-    }
-}
-
 /// Largest image accepted (UHD): the camera's view takes about 160 bytes a pixel, so this
 /// keeps a typo from allocating gigabytes.
 const MAX_SIDE: u32 = 8192;
@@ -297,10 +285,15 @@ impl Rig {
                     label("light", j, &self.lights[j].name)
                 ));
             }
-            let Some(fp) = footprint(&l.profile) else {
+            let Some(fp) =
+                crate::dmx::profile::Profile::built_in(&l.profile).map(|p| p.footprint() as u32)
+            else {
                 return bad(format!(
-                    "{what}: unknown profile `{}` (dimmer, dimmer16, rgb, irgb, rgbw, irgbw, rgba)",
-                    l.profile
+                    "{what}: unknown profile `{}` ({})",
+                    l.profile,
+                    crate::dmx::profile::Profile::built_in_names()
+                        .collect::<Vec<_>>()
+                        .join(", ")
                 ));
             };
             if !(1..=63999).contains(&l.universe) {
