@@ -241,56 +241,40 @@ fn bad_scenes_fail_with_one_line_naming_the_problem() {
     std::fs::write(&path, &bytes[..bytes.len() / 2]).unwrap();
     fails_with(&gallery(&truncated), "001.exr");
 
-    let profile = stripes(&dir.join("profile"), 2, false);
-    let toml = std::fs::read_to_string(profile.join("scene.toml")).unwrap();
-    std::fs::write(
-        profile.join("scene.toml"),
-        toml.replacen("irgb", "movinghead", 1),
-    )
-    .unwrap();
-    fails_with(&gallery(&profile), "unknown profile `movinghead`");
-
-    let overlap = stripes(&dir.join("overlap"), 2, false);
-    let toml = std::fs::read_to_string(overlap.join("scene.toml")).unwrap();
-    std::fs::write(
-        overlap.join("scene.toml"),
-        toml.replacen("address = 5", "address = 3", 1),
-    )
-    .unwrap();
-    fails_with(
-        &gallery(&overlap),
-        "lights 1 and 2 both use universe 1 slot 3",
-    );
-
-    let overflow = stripes(&dir.join("overflow"), 2, false);
-    let toml = std::fs::read_to_string(overflow.join("scene.toml")).unwrap();
-    std::fs::write(
-        overflow.join("scene.toml"),
-        toml.replacen("address = 5", "address = 510", 1),
-    )
-    .unwrap();
-    fails_with(&gallery(&overflow), "does not fit in slots 1-512");
-
-    let typo = stripes(&dir.join("typo"), 2, false);
-    let toml = std::fs::read_to_string(typo.join("scene.toml")).unwrap();
-    std::fs::write(
-        typo.join("scene.toml"),
-        toml.replacen("universe", "univers", 1),
-    )
-    .unwrap();
-    fails_with(&gallery(&typo), "line ");
-
-    let escape = stripes(&dir.join("escape"), 2, false);
-    let toml = std::fs::read_to_string(escape.join("scene.toml")).unwrap();
-    std::fs::write(
-        escape.join("scene.toml"),
-        toml.replacen("basis/001.exr", "../../etc/passwd", 1),
-    )
-    .unwrap();
-    fails_with(
-        &gallery(&escape),
-        "must be a relative path inside the scene folder",
-    );
+    // A two-light scene whose scene.toml has `from` replaced by `to` once.
+    let edited = |name: &str, from: &str, to: &str| {
+        let scene = stripes(&dir.join(name), 2, false);
+        let toml = std::fs::read_to_string(scene.join("scene.toml")).unwrap();
+        std::fs::write(scene.join("scene.toml"), toml.replacen(from, to, 1)).unwrap();
+        scene
+    };
+    let cases = [
+        ("irgb", "movinghead", "unknown profile `movinghead`"),
+        (
+            "address = 5",
+            "address = 3",
+            "lights 1 and 2 both use universe 1 slot 3",
+        ),
+        (
+            "address = 5",
+            "address = 510",
+            "does not fit in slots 1-512",
+        ),
+        ("universe", "univers", "line "),
+        (
+            "basis/001.exr",
+            "../../etc/passwd",
+            "must be a relative path inside the scene folder",
+        ),
+        (
+            "channel = 2",
+            "channel = 1",
+            "channel 1 is used by two lights",
+        ),
+    ];
+    for (i, (from, to, needle)) in cases.into_iter().enumerate() {
+        fails_with(&gallery(&edited(&format!("edit{i}"), from, to)), needle);
+    }
 }
 
 #[test]

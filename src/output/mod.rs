@@ -303,6 +303,24 @@ impl Sockets {
     }
 }
 
+/// Sends one encoded packet; a failure (encoding or socket) is counted and logged at a
+/// rate-limited pace, never fatal: the clock goes on.
+fn deliver(
+    socket: &UdpSocket,
+    counters: &Counters,
+    log: &mut Throttle,
+    now: Instant,
+    protocol: &str,
+    to: SocketAddr,
+    packet: Result<&[u8], String>,
+) {
+    let result = packet.and_then(|p| socket.send_to(p, to).map(drop).map_err(|e| e.to_string()));
+    if let Err(e) = result {
+        counters.send_errors.fetch_add(1, Ordering::Relaxed);
+        log.error(now, protocol, to, &e);
+    }
+}
+
 /// Rate-limits send-error logging to one line per destination per 10 s.
 #[derive(Debug, Default)]
 struct Throttle {
@@ -518,17 +536,18 @@ impl Clock {
                 priority: sink.priority,
                 sync_universe: sink.sync_universe,
             };
-            let result = wire::sacn_data(&src, universe, seq, terminated, data, &mut self.buf)
-                .and_then(|()| {
-                    self.sockets[sink.socket]
-                        .send_to(&self.buf, to)
-                        .map(drop)
-                        .map_err(|e| e.to_string())
-                });
-            if let Err(e) = result {
-                self.counters.send_errors.fetch_add(1, Ordering::Relaxed);
-                sink.log.error(now, "sACN", to, &e);
-            }
+            let packet = wire::sacn_data(&src, universe, seq, terminated, data, &mut self.buf)
+                .map(|()| self.buf.as_slice());
+            let socket = &self.sockets[sink.socket];
+            deliver(
+                socket,
+                &self.counters,
+                &mut sink.log,
+                now,
+                "sACN",
+                to,
+                packet,
+            );
         }
         if terminated || self.artnet.is_empty() {
             return;
@@ -536,16 +555,18 @@ impl Clock {
         self.artnet_sequence[u] = wire::next_artnet_sequence(self.artnet_sequence[u]);
         let seq = self.artnet_sequence[u];
         for sink in &mut self.artnet {
-            let result = wire::artdmx(sink.port_addresses[u], seq, data).and_then(|packet| {
-                self.sockets[sink.socket]
-                    .send_to(&packet, sink.to)
-                    .map(drop)
-                    .map_err(|e| e.to_string())
-            });
-            if let Err(e) = result {
-                self.counters.send_errors.fetch_add(1, Ordering::Relaxed);
-                sink.log.error(now, "Art-Net", sink.to, &e);
-            }
+            let packet = wire::artdmx(sink.port_addresses[u], seq, data);
+            let socket = &self.sockets[sink.socket];
+            let packet = packet.as_deref().map_err(Clone::clone);
+            deliver(
+                socket,
+                &self.counters,
+                &mut sink.log,
+                now,
+                "Art-Net",
+                sink.to,
+                packet,
+            );
         }
     }
 
@@ -554,22 +575,23 @@ impl Clock {
         for sink in self.sacn.iter_mut().filter(|s| s.sync_universe != 0) {
             sink.sync_sequence = wire::next_sacn_sequence(sink.sync_sequence);
             let to = sink.address(sink.sync_universe);
-            let result = wire::sacn_sync(
+            let packet = wire::sacn_sync(
                 self.cid,
                 sink.sync_universe,
                 sink.sync_sequence,
                 &mut self.buf,
             )
-            .and_then(|()| {
-                self.sockets[sink.socket]
-                    .send_to(&self.buf, to)
-                    .map(drop)
-                    .map_err(|e| e.to_string())
-            });
-            if let Err(e) = result {
-                self.counters.send_errors.fetch_add(1, Ordering::Relaxed);
-                sink.log.error(now, "sACN", to, &e);
-            }
+            .map(|()| self.buf.as_slice());
+            let socket = &self.sockets[sink.socket];
+            deliver(
+                socket,
+                &self.counters,
+                &mut sink.log,
+                now,
+                "sACN",
+                to,
+                packet,
+            );
         }
     }
 
