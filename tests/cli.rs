@@ -358,3 +358,51 @@ fn check_summarises_a_clean_scene_and_refuses_a_broken_one() {
         "channel 1 is used by two lights",
     );
 }
+
+#[test]
+fn basis_images_may_be_half_or_float_rgb_or_rgba_scanline_or_tiled() {
+    use exr::prelude::*;
+    let dir = temp_dir("cli-exr-kinds");
+    let scene = stripes(&dir.join("scene"), 4, false);
+    let (w, h) = (16, 10);
+    let value = |x: usize| if (4..8).contains(&x) { 0.5f32 } else { 0.0 };
+    // Light 2 becomes a tiled RGBA half-float image with the same content.
+    let layer = Layer::new(
+        (w, h),
+        LayerAttributes::named("rgba"),
+        Encoding {
+            compression: Compression::ZIP1,
+            blocks: Blocks::Tiles(Vec2(8, 8)),
+            line_order: LineOrder::Increasing,
+        },
+        SpecificChannels::rgba(|Vec2(x, _y): Vec2<usize>| {
+            let v = f16::from_f32(value(x));
+            (v, v, v, f16::ONE)
+        }),
+    );
+    Image::from_layer(layer)
+        .write()
+        .to_file(scene.join("basis/002.exr"))
+        .unwrap();
+    let look = dir.join("look.json");
+    std::fs::write(&look, r#"{"lights": [{"channel": 2, "intensity": 1.0}]}"#).unwrap();
+    let png = dir.join("out.png");
+    let out = run(&[
+        "render",
+        "--scene",
+        s(&scene),
+        "--look",
+        s(&look),
+        "--out",
+        s(&png),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let img = image::open(&png).unwrap().to_rgb8();
+    let want = visobjd::color::encode_srgb8(0.5);
+    assert_eq!(img.get_pixel(5, 3).0, [want; 3]);
+    assert_eq!(img.get_pixel(9, 3).0, [0; 3]);
+}
