@@ -2,6 +2,7 @@
 
 mod gallery;
 mod render;
+mod send;
 
 use clap::{ArgMatches, CommandFactory, FromArgMatches, Parser, Subcommand};
 
@@ -19,6 +20,8 @@ enum Command {
     Gallery(gallery::Args),
     /// Renders one look file to a PNG.
     Render(render::Args),
+    /// A small OSC client: sends one message, prints the replies that arrive within --wait.
+    Send(send::Args),
 }
 
 /// Runs the command line; returns the process exit code. User mistakes print one line on
@@ -36,6 +39,7 @@ pub fn main() -> std::process::ExitCode {
     let result = match cli.command {
         Command::Gallery(args) => gallery::run(args, sub),
         Command::Render(args) => render::run(args),
+        Command::Send(args) => send::run(args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
