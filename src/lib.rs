@@ -8,6 +8,7 @@ pub mod dmx;
 pub mod gallery;
 pub mod look;
 pub mod objective;
+pub mod osc;
 pub mod output;
 pub mod render;
 pub mod sampler;

@@ -3,6 +3,7 @@
 mod check;
 mod gallery;
 mod render;
+mod send;
 
 use clap::{ArgMatches, CommandFactory, FromArgMatches, Parser, Subcommand};
 
@@ -31,6 +32,8 @@ enum Command {
         #[arg(long)]
         out: std::path::PathBuf,
     },
+    /// A small OSC client: sends one message, prints the replies that arrive within --wait.
+    Send(send::Args),
 }
 
 /// Runs the command line; returns the process exit code. User mistakes print one line on
@@ -61,6 +64,7 @@ pub fn main() -> std::process::ExitCode {
                 )
             })
             .map_err(anyhow::Error::from),
+        Command::Send(args) => send::run(args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

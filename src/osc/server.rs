@@ -1,0 +1,632 @@
+//! The OSC listeners: UDP and TCP sockets on the `[osc]` addresses, the sender allow-list,
+//! stream framing, and routing of replies back to whoever asked.
+//!
+//! Everything the engine sees goes through [`Handler`]; everything between the socket and
+//! the handler lives here. Limits ([`Limits`]) keep one misbehaving client from costing
+//! others anything: a connection cap, an idle timeout, a frame size limit, and a bounded
+//! queue for replies sent after the fact.
+
+use std::net::{IpAddr, SocketAddr};
+use std::panic::AssertUnwindSafe;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use rosc::{OscMessage, OscPacket, OscType};
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::net::{TcpListener, TcpStream, UdpSocket};
+use tokio::sync::{Notify, mpsc};
+use tokio::task::{JoinHandle, JoinSet};
+use tracing::{debug, error, info, trace, warn};
+
+use super::args::Request;
+use super::framing::{self, Decoder, Framing};
+use super::packet;
+use crate::config::{Cidr, OscConfig};
+
+/// What the engine implements to answer OSC.
+///
+/// Called once per message, in arrival order per sender (bundles flattened, run at once),
+/// from the task that received it: it must return quickly (milliseconds) and run long work
+/// elsewhere, answering later through a clone of the [`Peer`]. It never sees messages
+/// from senders outside the allow-list, packets that are not OSC, or button releases
+/// ([`Request::is_button_release`]). The returned messages are sent to the sender, in
+/// order. A panic in the handler is caught and answered with `/vo/error`.
+pub trait Handler: Send + Sync + 'static {
+    /// Answers one message.
+    fn handle(&self, msg: OscMessage, peer: &Peer) -> Vec<OscMessage>;
+}
+
+impl<F> Handler for F
+where
+    F: Fn(OscMessage, &Peer) -> Vec<OscMessage> + Send + Sync + 'static,
+{
+    fn handle(&self, msg: OscMessage, peer: &Peer) -> Vec<OscMessage> {
+        self(msg, peer)
+    }
+}
+
+/// Robustness limits; [`Limits::default`] is what the daemon runs with (tests shrink them).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Limits {
+    /// TCP connections open at once; further ones are closed as soon as they are accepted.
+    pub max_connections: usize,
+    /// A TCP connection that completes no frame for this long is closed.
+    pub idle_timeout: Duration,
+    /// The largest frame a TCP stream may carry; larger ones close the connection.
+    pub max_frame: usize,
+    /// Replies a connection may have queued ([`Peer::reply`]) before it is dropped as too
+    /// slow.
+    pub reply_queue: usize,
+}
+
+impl Default for Limits {
+    fn default() -> Self {
+        Limits {
+            max_connections: 64,
+            idle_timeout: Duration::from_secs(60),
+            max_frame: framing::MAX_FRAME,
+            reply_queue: 256,
+        }
+    }
+}
+
+/// How a message arrived.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Transport {
+    /// A datagram.
+    Udp,
+    /// A TCP connection, in the framing its client chose.
+    Tcp(Framing),
+}
+
+/// Who sent a message and the way back to them. Cloneable so the engine can answer long
+/// work later with [`Peer::reply`].
+#[derive(Clone, Debug)]
+pub struct Peer {
+    addr: SocketAddr,
+    reply_addr: SocketAddr,
+    route: Route,
+}
+
+#[derive(Clone, Debug)]
+enum Route {
+    Udp(Sender),
+    Tcp(Link),
+    Capture(std::sync::mpsc::Sender<OscMessage>),
+}
+
+impl Peer {
+    /// A peer whose replies are collected in a channel instead of sent: for testing a
+    /// handler without sockets.
+    pub fn capture(addr: SocketAddr) -> (Peer, std::sync::mpsc::Receiver<OscMessage>) {
+        let (tx, rx) = std::sync::mpsc::channel();
+        let peer = Peer {
+            addr,
+            reply_addr: addr,
+            route: Route::Capture(tx),
+        };
+        (peer, rx)
+    }
+
+    /// The sender's address and source port.
+    pub fn addr(&self) -> SocketAddr {
+        self.addr
+    }
+
+    /// Where UDP replies to this sender go: its address at `osc.reply_port`, or its source
+    /// port when that is 0. The default target for subscriptions.
+    pub fn reply_addr(&self) -> SocketAddr {
+        self.reply_addr
+    }
+
+    /// How the message arrived.
+    pub fn transport(&self) -> Transport {
+        match &self.route {
+            Route::Tcp(link) => Transport::Tcp(link.framing),
+            Route::Udp(_) | Route::Capture(_) => Transport::Udp,
+        }
+    }
+
+    /// Sends messages to this sender the way it reached us (UDP to [`Peer::reply_addr`], or
+    /// its TCP connection), without waiting. False if they could not all go: the
+    /// connection is gone, or too slow (its queue overflowed, so it is being dropped).
+    pub fn reply(&self, msgs: &[OscMessage]) -> bool {
+        msgs.iter().all(|m| match &self.route {
+            Route::Udp(sender) => sender.send(self.reply_addr, m).is_ok(),
+            Route::Tcp(link) => link.send(m),
+            Route::Capture(tx) => tx.send(m.clone()).is_ok(),
+        })
+    }
+}
+
+/// Sends OSC from the server's UDP socket (so replies come from the port clients talk to),
+/// to any address: for pushes such as subscriptions.
+#[derive(Clone, Debug)]
+pub struct Sender {
+    socket: Arc<UdpSocket>,
+}
+
+impl Sender {
+    /// Sends one message now, without waiting; an error says why it did not go (including
+    /// a full socket buffer).
+    pub fn send(&self, to: SocketAddr, msg: &OscMessage) -> Result<(), String> {
+        let bytes = encode(msg)?;
+        self.socket
+            .try_send_to(&bytes, to)
+            .map(drop)
+            .map_err(|e| format!("OSC to {to}: {}", plain(&e)))
+    }
+}
+
+/// One TCP connection's way back: a bounded queue drained by the connection's task.
+#[derive(Clone, Debug)]
+struct Link {
+    queue: mpsc::Sender<Vec<u8>>,
+    framing: Framing,
+    kill: Arc<Notify>,
+}
+
+impl Link {
+    fn send(&self, msg: &OscMessage) -> bool {
+        let Ok(bytes) = encode(msg) else {
+            return false;
+        };
+        match self.queue.try_send(framing::encode(self.framing, &bytes)) {
+            Ok(()) => true,
+            Err(mpsc::error::TrySendError::Full(_)) => {
+                self.kill.notify_one();
+                false
+            }
+            Err(mpsc::error::TrySendError::Closed(_)) => false,
+        }
+    }
+}
+
+/// The running listeners. Dropping it (or [`Server::stop`]) stops them; [`Sender`] handles
+/// keep the UDP socket open until they are dropped too.
+pub struct Server {
+    udp_addr: Option<SocketAddr>,
+    tcp_addr: Option<SocketAddr>,
+    sender: Option<Sender>,
+    shared: Arc<Shared>,
+    tasks: Vec<JoinHandle<()>>,
+}
+
+impl Server {
+    /// Binds the `[osc]` addresses ("" leaves one off) and starts serving with default
+    /// [`Limits`]. Must be called inside a tokio runtime. Errors name the config key and
+    /// address: "osc.udp 127.0.0.1:8000: address already in use".
+    pub fn start(config: &OscConfig, handler: Arc<dyn Handler>) -> Result<Server, String> {
+        Server::start_with_limits(config, handler, Limits::default())
+    }
+
+    /// [`Server::start`] with chosen limits.
+    pub fn start_with_limits(
+        config: &OscConfig,
+        handler: Arc<dyn Handler>,
+        limits: Limits,
+    ) -> Result<Server, String> {
+        tokio::runtime::Handle::try_current()
+            .map_err(|_| "osc: the server must be started inside a tokio runtime".to_string())?;
+        let allow = config
+            .allow
+            .iter()
+            .map(|a| Cidr::parse(a).map_err(|e| format!("osc.allow: {e}")))
+            .collect::<Result<Vec<_>, _>>()?;
+        let shared = Arc::new(Shared {
+            handler,
+            allow,
+            reply_port: config.reply_port,
+            limits,
+            refused: AtomicU64::new(0),
+            not_osc: AtomicU64::new(0),
+            refused_log: Mutex::default(),
+            not_osc_log: Mutex::default(),
+            busy_log: Mutex::default(),
+        });
+        let mut server = Server {
+            udp_addr: None,
+            tcp_addr: None,
+            sender: None,
+            shared: shared.clone(),
+            tasks: Vec::new(),
+        };
+        if let Some(addr) = listen_addr("osc.udp", &config.udp)? {
+            let socket = std::net::UdpSocket::bind(addr)
+                .and_then(|s| s.set_nonblocking(true).map(|()| s))
+                .and_then(UdpSocket::from_std)
+                .map_err(|e| format!("osc.udp {addr}: {}", plain(&e)))?;
+            let socket = Arc::new(socket);
+            let local = socket
+                .local_addr()
+                .map_err(|e| format!("osc.udp {addr}: {}", plain(&e)))?;
+            info!("OSC over UDP on {local}");
+            let sender = Sender { socket };
+            server.udp_addr = Some(local);
+            server.sender = Some(sender.clone());
+            server
+                .tasks
+                .push(tokio::spawn(udp_loop(sender, shared.clone())));
+        }
+        if let Some(addr) = listen_addr("osc.tcp", &config.tcp)? {
+            let listener = std::net::TcpListener::bind(addr)
+                .and_then(|l| l.set_nonblocking(true).map(|()| l))
+                .and_then(TcpListener::from_std)
+                .map_err(|e| format!("osc.tcp {addr}: {}", plain(&e)))?;
+            let local = listener
+                .local_addr()
+                .map_err(|e| format!("osc.tcp {addr}: {}", plain(&e)))?;
+            info!("OSC over TCP on {local}");
+            server.tcp_addr = Some(local);
+            server.tasks.push(tokio::spawn(tcp_loop(listener, shared)));
+        }
+        Ok(server)
+    }
+
+    /// The bound UDP address (the real port when configured with port 0), if UDP is on.
+    pub fn udp_addr(&self) -> Option<SocketAddr> {
+        self.udp_addr
+    }
+
+    /// The bound TCP address, if TCP is on.
+    pub fn tcp_addr(&self) -> Option<SocketAddr> {
+        self.tcp_addr
+    }
+
+    /// A handle for pushing OSC from the UDP socket, if UDP is on.
+    pub fn sender(&self) -> Option<Sender> {
+        self.sender.clone()
+    }
+
+    /// Packets and connections refused by the allow-list so far.
+    pub fn refused(&self) -> u64 {
+        self.shared.refused.load(Ordering::Relaxed)
+    }
+
+    /// Datagrams and frames that were not OSC (or nested too deep) so far.
+    pub fn not_osc(&self) -> u64 {
+        self.shared.not_osc.load(Ordering::Relaxed)
+    }
+
+    /// Stops listening and closes every connection; returns once the tasks are gone (the
+    /// TCP port is free; the UDP port once no [`Sender`] is left).
+    pub async fn stop(mut self) {
+        let tasks = std::mem::take(&mut self.tasks);
+        for t in &tasks {
+            t.abort();
+        }
+        for t in tasks {
+            // A cancelled task's error is the expected outcome.
+            let _ = t.await;
+        }
+    }
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        self.tasks.iter().for_each(JoinHandle::abort);
+    }
+}
+
+/// State every listener task shares.
+struct Shared {
+    handler: Arc<dyn Handler>,
+    allow: Vec<Cidr>,
+    reply_port: u16,
+    limits: Limits,
+    refused: AtomicU64,
+    not_osc: AtomicU64,
+    refused_log: Mutex<Throttle>,
+    not_osc_log: Mutex<Throttle>,
+    busy_log: Mutex<Throttle>,
+}
+
+impl Shared {
+    /// The allow-list check, done before anything from the sender is decoded.
+    fn permits(&self, from: SocketAddr) -> bool {
+        let ip = from.ip();
+        let ok = if self.allow.is_empty() {
+            match ip {
+                IpAddr::V4(v4) => v4.is_loopback(),
+                IpAddr::V6(v6) => v6
+                    .to_ipv4_mapped()
+                    .map_or(v6.is_loopback(), |v4| v4.is_loopback()),
+            }
+        } else {
+            self.allow.iter().any(|c| c.contains(ip))
+        };
+        if !ok {
+            self.refused.fetch_add(1, Ordering::Relaxed);
+            if let Some(n) = throttled(&self.refused_log) {
+                warn!("OSC: refused {from}, not in osc.allow ({n} refused since the last report)");
+            }
+        }
+        ok
+    }
+
+    fn reply_addr(&self, from: SocketAddr) -> SocketAddr {
+        match self.reply_port {
+            0 => from,
+            port => SocketAddr::new(from.ip(), port),
+        }
+    }
+
+    /// Runs one packet's messages through the handler, returning the replies in order.
+    fn dispatch(&self, bytes: &[u8], peer: &Peer) -> Vec<OscMessage> {
+        let msgs = match packet::decode(bytes) {
+            Ok(msgs) => msgs,
+            Err(e) => {
+                self.not_osc.fetch_add(1, Ordering::Relaxed);
+                if let Some(n) = throttled(&self.not_osc_log) {
+                    warn!(
+                        "OSC: ignored {} bytes from {}: {e} ({n} ignored since the last report)",
+                        bytes.len(),
+                        peer.addr
+                    );
+                }
+                return Vec::new();
+            }
+        };
+        let mut replies = Vec::new();
+        for msg in msgs {
+            if msg.args.len() <= 1 && Request::new(&msg).is_button_release() {
+                trace!("OSC: button release {} from {}", msg.addr, peer.addr);
+                continue;
+            }
+            let addr = msg.addr.clone();
+            match std::panic::catch_unwind(AssertUnwindSafe(|| self.handler.handle(msg, peer))) {
+                Ok(r) => replies.extend(r),
+                Err(_) => {
+                    error!("OSC: the handler panicked on {addr} from {}", peer.addr);
+                    replies.push(OscMessage {
+                        addr: "/vo/error".into(),
+                        args: vec![
+                            OscType::String(addr),
+                            OscType::String("internal error; see the daemon's log".into()),
+                        ],
+                    });
+                }
+            }
+        }
+        replies
+    }
+}
+
+async fn udp_loop(sender: Sender, shared: Arc<Shared>) {
+    let socket = sender.socket.clone();
+    let mut buf = vec![0u8; 65536];
+    let mut error_log = Throttle::default();
+    loop {
+        let (n, from) = match socket.recv_from(&mut buf).await {
+            Ok(got) => got,
+            Err(e) => {
+                if let Some(n) = error_log.hit() {
+                    debug!("OSC over UDP: receive failed: {e} ({n} since the last report)");
+                }
+                continue;
+            }
+        };
+        if !shared.permits(from) {
+            continue;
+        }
+        let peer = Peer {
+            addr: from,
+            reply_addr: shared.reply_addr(from),
+            route: Route::Udp(sender.clone()),
+        };
+        for reply in shared.dispatch(&buf[..n], &peer) {
+            let Ok(bytes) = encode(&reply) else { continue };
+            if let Err(e) = socket.send_to(&bytes, peer.reply_addr).await {
+                debug!("OSC: reply to {} failed: {e}", peer.reply_addr);
+            }
+        }
+    }
+}
+
+async fn tcp_loop(listener: TcpListener, shared: Arc<Shared>) {
+    let mut conns = JoinSet::new();
+    loop {
+        tokio::select! {
+            biased;
+            Some(_) = conns.join_next(), if !conns.is_empty() => {}
+            accepted = listener.accept() => match accepted {
+                Ok((stream, from)) => {
+                    if !shared.permits(from) {
+                        continue;
+                    }
+                    if conns.len() >= shared.limits.max_connections {
+                        if let Some(n) = throttled(&shared.busy_log) {
+                            warn!(
+                                "OSC over TCP: {} connections already open; closed {from} ({n} closed since the last report)",
+                                conns.len()
+                            );
+                        }
+                        continue;
+                    }
+                    conns.spawn(connection(stream, from, shared.clone()));
+                }
+                Err(e) => {
+                    if let Some(n) = throttled(&shared.busy_log) {
+                        warn!("OSC over TCP: accept failed: {e} ({n} since the last report)");
+                    }
+                    // Out of descriptors or similar: back off instead of spinning.
+                    tokio::time::sleep(Duration::from_millis(50)).await;
+                }
+            },
+        }
+    }
+}
+
+/// Serves one TCP connection until it closes, idles out, breaks the framing, or lets its
+/// reply queue overflow.
+async fn connection(stream: TcpStream, from: SocketAddr, shared: Arc<Shared>) {
+    debug!("OSC over TCP: {from} connected");
+    // Small replies should not wait for Nagle; failing to set it only costs latency.
+    let _ = stream.set_nodelay(true);
+    let (mut rd, mut wr) = stream.into_split();
+    let limits = shared.limits;
+    let (queue, mut queued) = mpsc::channel::<Vec<u8>>(limits.reply_queue.max(1));
+    let kill = Arc::new(Notify::new());
+    let mut decoder = Decoder::new(limits.max_frame);
+    let mut buf = vec![0u8; 8192];
+    let mut frames = Vec::new();
+    let mut deadline = tokio::time::Instant::now() + limits.idle_timeout;
+    let why = loop {
+        tokio::select! {
+            biased;
+            () = kill.notified() => break "its reply queue overflowed (it does not read)".to_string(),
+            Some(bytes) = queued.recv() => {
+                if let Err(e) = write(&mut wr, &bytes, deadline).await {
+                    break e;
+                }
+            }
+            read = tokio::time::timeout_at(deadline, rd.read(&mut buf)) => {
+                let n = match read {
+                    Err(_) => break format!("idle for {:?}", limits.idle_timeout),
+                    Ok(Err(e)) => break e.to_string(),
+                    Ok(Ok(0)) => {
+                        // Flush what is queued for a client that half-closed and waits.
+                        while let Ok(bytes) = queued.try_recv() {
+                            if write(&mut wr, &bytes, deadline).await.is_err() {
+                                break;
+                            }
+                        }
+                        break "closed by the client".to_string();
+                    }
+                    Ok(Ok(n)) => n,
+                };
+                if let Err(e) = decoder.feed(&buf[..n], &mut frames) {
+                    warn!("OSC over TCP: closing {from}: {e}");
+                    return;
+                }
+                let Some(framing) = decoder.framing() else { continue };
+                if frames.is_empty() {
+                    continue;
+                }
+                deadline = tokio::time::Instant::now() + limits.idle_timeout;
+                let peer = Peer {
+                    addr: from,
+                    reply_addr: shared.reply_addr(from),
+                    route: Route::Tcp(Link { queue: queue.clone(), framing, kill: kill.clone() }),
+                };
+                let mut out = Vec::new();
+                for frame in frames.drain(..) {
+                    for reply in shared.dispatch(&frame, &peer) {
+                        if let Ok(bytes) = encode(&reply) {
+                            out.extend(framing::encode(framing, &bytes));
+                        }
+                    }
+                }
+                if let Err(e) = write(&mut wr, &out, deadline).await {
+                    break e;
+                }
+            }
+        }
+    };
+    debug!("OSC over TCP: {from} disconnected: {why}");
+}
+
+/// Writes all of `bytes`, giving up at the connection's idle deadline (a client that never
+/// reads cannot hold the task forever).
+async fn write(
+    wr: &mut tokio::net::tcp::OwnedWriteHalf,
+    bytes: &[u8],
+    deadline: tokio::time::Instant,
+) -> Result<(), String> {
+    if bytes.is_empty() {
+        return Ok(());
+    }
+    match tokio::time::timeout_at(deadline, wr.write_all(bytes)).await {
+        Ok(Ok(())) => Ok(()),
+        Ok(Err(e)) => Err(e.to_string()),
+        Err(_) => Err("a reply could not be written before the idle timeout".into()),
+    }
+}
+
+fn encode(msg: &OscMessage) -> Result<Vec<u8>, String> {
+    rosc::encoder::encode(&OscPacket::Message(msg.clone()))
+        .map_err(|e| format!("cannot encode {}: {e}", msg.addr))
+}
+
+/// Parses a listen address from the config; "" is off.
+fn listen_addr(key: &str, value: &str) -> Result<Option<SocketAddr>, String> {
+    if value.trim().is_empty() {
+        return Ok(None);
+    }
+    value
+        .trim()
+        .parse()
+        .map(Some)
+        .map_err(|_| format!("{key} `{value}`: not an address:port such as 127.0.0.1:8000"))
+}
+
+/// An I/O error as a lowercase phrase without the OS error number.
+fn plain(e: &std::io::Error) -> String {
+    let s = e.to_string();
+    let s = s.split(" (os error").next().unwrap_or(&s);
+    let mut chars = s.chars();
+    chars
+        .next()
+        .map(|c| c.to_lowercase().chain(chars).collect())
+        .unwrap_or_default()
+}
+
+/// At most one log line per 10 s for a noisy event, reporting how many happened meanwhile.
+#[derive(Debug, Default)]
+struct Throttle {
+    last: Option<Instant>,
+    count: u64,
+}
+
+const LOG_EVERY: Duration = Duration::from_secs(10);
+
+impl Throttle {
+    /// Counts an event; Some(count since the last line) when a line should be logged now.
+    fn hit(&mut self) -> Option<u64> {
+        self.count += 1;
+        let now = Instant::now();
+        if self.last.is_some_and(|l| now.duration_since(l) < LOG_EVERY) {
+            return None;
+        }
+        self.last = Some(now);
+        Some(std::mem::take(&mut self.count))
+    }
+}
+
+fn throttled(t: &Mutex<Throttle>) -> Option<u64> {
+    t.lock().unwrap_or_else(|e| e.into_inner()).hit()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn throttle_logs_once_per_period_with_a_count() {
+        let mut t = Throttle::default();
+        assert_eq!(t.hit(), Some(1));
+        assert_eq!(t.hit(), None);
+        assert_eq!(t.hit(), None);
+        t.last = t.last.and_then(|l| l.checked_sub(LOG_EVERY));
+        assert_eq!(t.hit(), Some(3));
+    }
+
+    #[test]
+    fn io_errors_read_as_phrases() {
+        let e = std::io::Error::from_raw_os_error(98);
+        assert_eq!(plain(&e), "address already in use");
+    }
+
+    #[test]
+    fn captured_peers_collect_replies() {
+        let (peer, rx) = Peer::capture("127.0.0.1:9".parse().unwrap());
+        let m = OscMessage {
+            addr: "/x".into(),
+            args: vec![],
+        };
+        assert!(peer.reply(std::slice::from_ref(&m)));
+        assert_eq!(rx.try_recv(), Ok(m));
+        assert_eq!(peer.transport(), Transport::Udp);
+    }
+}
