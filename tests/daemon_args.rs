@@ -118,7 +118,11 @@ fn bundles_run_in_order() {
     assert_eq!(addrs, ["/vo/light", "/vo/light", "/vo/error"], "{got:?}");
     assert!((num(&got[0].args[1]) - 0.1).abs() < 1e-6);
     assert!((num(&got[1].args[1]) - 0.9).abs() < 1e-6);
-    let rest = d.collect("/vo/live", common::daemon::PATIENCE, "the bundle's /vo/live");
+    let rest = d.collect(
+        "/vo/live",
+        common::daemon::PATIENCE,
+        "the bundle's /vo/live",
+    );
     assert_eq!(rest.len(), 1, "{rest:?}");
     assert!((num(&rest[0].args[1]) - 0.9).abs() < 1e-6, "{rest:?}");
 }
@@ -162,8 +166,16 @@ fn over_tcp(framing: Framing) {
             msg("/vo/master", vec![float(0.5)]),
         ],
     }));
-    assert_eq!(c.collect("/vo/fade", common::daemon::PATIENCE, "bundle").len(), 1);
-    assert_eq!(c.collect("/vo/master", common::daemon::PATIENCE, "bundle").len(), 1);
+    assert_eq!(
+        c.collect("/vo/fade", common::daemon::PATIENCE, "bundle")
+            .len(),
+        1
+    );
+    assert_eq!(
+        c.collect("/vo/master", common::daemon::PATIENCE, "bundle")
+            .len(),
+        1
+    );
     // The UDP side sees the same daemon.
     let s = d.status();
     assert_eq!((s.fade, s.master), (3.0, 0.5));
@@ -197,7 +209,11 @@ fn replies_carry_the_contract_types() {
     };
     let r = d.ok("/vo/status", vec![], "/vo/status");
     assert_eq!(tags(&r), "siiiiifif", "{r:?}");
-    let r = d.ok("/vo/objective/add", vec![string("grey.png")], "/vo/objective/added");
+    let r = d.ok(
+        "/vo/objective/add",
+        vec![string("grey.png")],
+        "/vo/objective/added",
+    );
     assert_eq!(tags(&r), "isfff", "{r:?}");
     let r = d.ok("/vo/light/3/intensity", vec![float(0.5)], "/vo/light");
     assert_eq!(tags(&r), "iffff", "{r:?}");
@@ -217,7 +233,13 @@ fn replies_carry_the_contract_types() {
 fn visobjd_send_prints_the_pong() {
     let d = Daemon::start("args-send");
     let out = Command::new(bin())
-        .args(["send", "--to", &format!("127.0.0.1:{}", d.port), "/vo/ping", "1"])
+        .args([
+            "send",
+            "--to",
+            &format!("127.0.0.1:{}", d.port),
+            "/vo/ping",
+            "1",
+        ])
         .output()
         .expect("visobjd send runs");
     assert!(out.status.success(), "{out:?}");

@@ -4,8 +4,7 @@
 mod common;
 
 use common::daemon::{
-    CLUSTERS, COUNT, Daemon, Light, Osc, STAGE, fixture, float, int, num, same_look, string,
-    text,
+    CLUSTERS, COUNT, Daemon, Light, Osc, STAGE, fixture, float, int, num, same_look, string, text,
 };
 
 /// A daemon with one objective and a generated gallery; returns it with the entry sizes.
@@ -69,7 +68,11 @@ fn count_clusters_and_seed() {
     d.add_objective("cool.png", "both");
     let r = d.ok("/vo/generate/count", vec![int(12)], "/vo/generate/count");
     assert_eq!(num(&r.args[0]) as i32, 12);
-    let r = d.ok("/vo/generate/clusters", vec![int(3)], "/vo/generate/clusters");
+    let r = d.ok(
+        "/vo/generate/clusters",
+        vec![int(3)],
+        "/vo/generate/clusters",
+    );
     assert_eq!(num(&r.args[0]) as i32, 3);
     let r = d.ok("/vo/generate/seed", vec![int(7)], "/vo/generate/seed");
     assert_eq!(num(&r.args[0]) as i32, 7);
@@ -123,7 +126,11 @@ fn pick_goes_live_and_becomes_the_base() {
     assert_eq!(d.status().entry, k);
     let want = d.candidate(k, 1);
     // fade_s = 0 in the config: live at once.
-    assert!(same_look(&d.live(), &want, 1e-6), "{:?} vs {want:?}", d.live());
+    assert!(
+        same_look(&d.live(), &want, 1e-6),
+        "{:?} vs {want:?}",
+        d.live()
+    );
     if let Some(big) = sizes.iter().position(|&s| s >= 2) {
         let k = big as i32 + 1;
         let r = d.ok("/vo/pick", vec![int(k), int(2)], "/vo/picked");
@@ -168,7 +175,11 @@ fn next_and_prev_step_and_wrap() {
     let c = sizes.len() as i32;
     d.ok("/vo/pick", vec![int(1)], "/vo/picked");
     let r = d.ok("/vo/prev", vec![], "/vo/picked");
-    assert_eq!((num(&r.args[0]) as i32, num(&r.args[1]) as i32), (c, 1), "wraps back");
+    assert_eq!(
+        (num(&r.args[0]) as i32, num(&r.args[1]) as i32),
+        (c, 1),
+        "wraps back"
+    );
     assert!(same_look(&d.live(), &d.candidate(c, 1), 1e-6));
     let r = d.ok("/vo/next", vec![], "/vo/picked");
     assert_eq!(num(&r.args[0]) as i32, 1, "wraps forward");
@@ -196,16 +207,26 @@ fn undo_and_redo_walk_the_base_history() {
     let r = d.ok("/vo/undo", vec![], "/vo/undone");
     let depth = num(&r.args[0]) as i32;
     assert!(depth >= 0, "{r:?}");
-    assert!(same_look(&d.live(), &one, 1e-6), "undo brings back the previous look");
+    assert!(
+        same_look(&d.live(), &one, 1e-6),
+        "undo brings back the previous look"
+    );
     let r = d.ok("/vo/redo", vec![], "/vo/redone");
     assert!(num(&r.args[0]) as i32 >= 0, "{r:?}");
-    assert!(same_look(&d.live(), &two, 1e-6), "redo brings the undone look back");
+    assert!(
+        same_look(&d.live(), &two, 1e-6),
+        "redo brings the undone look back"
+    );
     d.refused("/vo/redo", vec![]);
     // Undo all the way back to the dark start, then no further.
     d.ok("/vo/undo", vec![], "/vo/undone");
     let r = d.ok("/vo/undo", vec![], "/vo/undone");
     assert!(num(&r.args[0]) as i32 <= depth, "{r:?}");
-    assert!(d.live().iter().all(|l| l.intensity == 0.0), "{:?}", d.live());
+    assert!(
+        d.live().iter().all(|l| l.intensity == 0.0),
+        "{:?}",
+        d.live()
+    );
     d.refused("/vo/undo", vec![]);
     d.refused("/vo/undoo", vec![]);
     // 32 steps at least.
@@ -214,7 +235,11 @@ fn undo_and_redo_walk_the_base_history() {
     }
     for i in 0..32 {
         let r = d.call("/vo/undo", vec![], "/vo/undone");
-        assert_eq!(r.last().map(|m| m.addr.as_str()), Some("/vo/undone"), "undo {i}: {r:?}");
+        assert_eq!(
+            r.last().map(|m| m.addr.as_str()),
+            Some("/vo/undone"),
+            "undo {i}: {r:?}"
+        );
     }
 }
 
@@ -230,7 +255,11 @@ fn candidate_and_gallery_refuse_what_is_not_there() {
     let sizes = d.gallery();
     let c = sizes.len() as i32;
     let r = d.ok("/vo/candidate/1", vec![], "/vo/candidate");
-    assert_eq!((num(&r.args[0]) as i32, num(&r.args[1]) as i32), (1, 1), "m defaults to 1");
+    assert_eq!(
+        (num(&r.args[0]) as i32, num(&r.args[1]) as i32),
+        (1, 1),
+        "m defaults to 1"
+    );
     for bad in [
         vec![int(0)],
         vec![int(c + 1)],
@@ -248,7 +277,11 @@ fn unreached_and_locked_lights_keep_the_base() {
     let mut d = Daemon::start("gal-targeting");
     // A base look: light 4 (right half) and light 1 (left half) set by faders.
     d.ok("/vo/light/4/intensity", vec![float(0.3)], "/vo/light");
-    d.ok("/vo/light/4/color", vec![float(0.2), float(0.4), float(0.6)], "/vo/light");
+    d.ok(
+        "/vo/light/4/color",
+        vec![float(0.2), float(0.4), float(0.6)],
+        "/vo/light",
+    );
     d.ok("/vo/light/1/level", vec![int(70)], "/vo/light");
     let base = d.live();
     let id = d.add_objective("warm.png", "both");
@@ -268,7 +301,11 @@ fn unreached_and_locked_lights_keep_the_base() {
             for (got, want) in cand.iter().zip(&base) {
                 let same = same_look(std::slice::from_ref(got), std::slice::from_ref(want), 1e-4);
                 if got.ch >= 4 || got.ch == 2 {
-                    assert!(same, "light {} is unreached or locked: {got:?} vs {want:?}", got.ch);
+                    assert!(
+                        same,
+                        "light {} is unreached or locked: {got:?} vs {want:?}",
+                        got.ch
+                    );
                 } else if !same {
                     moved += 1;
                 }
@@ -282,11 +319,17 @@ fn unreached_and_locked_lights_keep_the_base() {
 fn constraints_reply_and_refuse() {
     let mut d = Daemon::start("gal-constraints");
     let r = d.ok("/vo/group/front/key", vec![int(1)], "/vo/group/key");
-    assert_eq!((text(&r.args[0]).as_str(), num(&r.args[1]) as i32), ("front", 1));
+    assert_eq!(
+        (text(&r.args[0]).as_str(), num(&r.args[1]) as i32),
+        ("front", 1)
+    );
     let r = d.ok("/vo/group/front/key", vec![int(0)], "/vo/group/key");
     assert_eq!(num(&r.args[1]) as i32, 0);
     let r = d.ok("/vo/group/back/lock", vec![float(1.0)], "/vo/group/lock");
-    assert_eq!((text(&r.args[0]).as_str(), num(&r.args[1]) as i32), ("back", 1));
+    assert_eq!(
+        (text(&r.args[0]).as_str(), num(&r.args[1]) as i32),
+        ("back", 1)
+    );
     let r = d.ok("/vo/light/3/lock", vec![string("1")], "/vo/light/lock");
     assert_eq!((num(&r.args[0]) as i32, num(&r.args[1]) as i32), (3, 1));
     for (addr, args) in [

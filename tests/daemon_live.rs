@@ -3,9 +3,7 @@
 
 mod common;
 
-use common::daemon::{
-    Daemon, Osc, PATIENCE, Proto, STAGE, fixture, float, int, num, string, text,
-};
+use common::daemon::{Daemon, Osc, PATIENCE, Proto, STAGE, fixture, float, int, num, string, text};
 
 fn close(a: f64, b: f64) -> bool {
     (a - b).abs() < 1e-4
@@ -47,7 +45,10 @@ fn light_intensity_and_level_are_faders() {
     }
     assert_eq!(d.snapshot(), before);
     let sentence = d.err("/vo/light/99/level", vec![int(50)]);
-    assert!(sentence.contains("99"), "the error names the light: {sentence}");
+    assert!(
+        sentence.contains("99"),
+        "the error names the light: {sentence}"
+    );
 }
 
 #[test]
@@ -61,22 +62,40 @@ fn light_color_sets_a_colour_light_and_refuses_a_dimmer() {
     );
     let v: Vec<f64> = r.args.iter().map(num).collect();
     assert!(close(v[0], 3.0) && close(v[1], 1.0), "{r:?}");
-    assert!(close(v[2], 1.0) && close(v[3], 0.5) && close(v[4], 0.0), "{r:?}");
+    assert!(
+        close(v[2], 1.0) && close(v[3], 0.5) && close(v[4], 0.0),
+        "{r:?}"
+    );
     // irgb at 10: intensity 255, red 255, green = linear(0.5) = 0.214 -> 55, blue 0.
     d.wire
         .wait_both(1, "irgb 3 at orange", |dmx| dmx[9..13] == [255, 255, 55, 0]);
     let before = d.snapshot();
     for (addr, args) in [
-        ("/vo/light/1/color", vec![float(1.0), float(0.0), float(0.0)]),
-        ("/vo/light/3/color", vec![float(1.2), float(0.0), float(0.0)]),
+        (
+            "/vo/light/1/color",
+            vec![float(1.0), float(0.0), float(0.0)],
+        ),
+        (
+            "/vo/light/3/color",
+            vec![float(1.2), float(0.0), float(0.0)],
+        ),
         ("/vo/light/3/color", vec![float(1.0), float(0.0)]),
-        ("/vo/light/3/color", vec![string("red"), float(0.0), float(0.0)]),
-        ("/vo/light/99/color", vec![float(1.0), float(0.0), float(0.0)]),
+        (
+            "/vo/light/3/color",
+            vec![string("red"), float(0.0), float(0.0)],
+        ),
+        (
+            "/vo/light/99/color",
+            vec![float(1.0), float(0.0), float(0.0)],
+        ),
     ] {
         d.err(addr, args);
     }
     assert_eq!(d.snapshot(), before);
-    let sentence = d.err("/vo/light/1/color", vec![float(1.0), float(0.0), float(0.0)]);
+    let sentence = d.err(
+        "/vo/light/1/color",
+        vec![float(1.0), float(0.0), float(0.0)],
+    );
     assert!(!sentence.is_empty());
 }
 
@@ -84,7 +103,10 @@ fn light_color_sets_a_colour_light_and_refuses_a_dimmer() {
 fn group_faders_and_colour() {
     let mut d = Daemon::start("live-group");
     let r = d.ok("/vo/group/back/intensity", vec![float(0.5)], "/vo/group");
-    assert_eq!((text(&r.args[0]).as_str(), num(&r.args[1]) as i32), ("back", 2));
+    assert_eq!(
+        (text(&r.args[0]).as_str(), num(&r.args[1]) as i32),
+        ("back", 2)
+    );
     let r = d.ok("/vo/Group/FRONT/level", vec![int(20)], "/vo/group");
     assert_eq!(num(&r.args[1]) as i32, 2, "{r:?}");
     let r = d.ok(
@@ -112,9 +134,15 @@ fn group_faders_and_colour() {
         ("/vo/group/back/intensity", vec![float(2.0)]),
         ("/vo/group/back/level", vec![int(101)]),
         ("/vo/group/back/level", vec![string("full")]),
-        ("/vo/group/side/color", vec![float(0.0), float(-1.0), float(1.0)]),
+        (
+            "/vo/group/side/color",
+            vec![float(0.0), float(-1.0), float(1.0)],
+        ),
         // Every light of "front" is a dimmer.
-        ("/vo/group/front/color", vec![float(1.0), float(0.0), float(0.0)]),
+        (
+            "/vo/group/front/color",
+            vec![float(1.0), float(0.0), float(0.0)],
+        ),
     ] {
         d.err(addr, args);
     }
@@ -126,7 +154,10 @@ fn live_lists_every_light() {
     let mut d = Daemon::start("live-live");
     let live = d.live();
     assert_eq!(live.len(), STAGE.len());
-    assert!(live.iter().all(|l| l.intensity == 0.0), "a new stage starts dark: {live:?}");
+    assert!(
+        live.iter().all(|l| l.intensity == 0.0),
+        "a new stage starts dark: {live:?}"
+    );
     for l in &live {
         if !fixture(l.ch).has_colour() {
             assert_eq!(l.color, [1.0; 3], "{l:?}");
@@ -162,7 +193,8 @@ fn master_scales_output_and_blackout_zeros_it() {
     assert!(close(d.status().master, 0.5));
     d.wire.wait_both(1, "dimmer 1 at half", |dmx| dmx[0] == 128);
     // rgb without a dimmer: intensity folded into white emitters.
-    d.wire.wait_both(2, "rgb 5 at half", |dmx| dmx[9..12] == [128, 128, 128]);
+    d.wire
+        .wait_both(2, "rgb 5 at half", |dmx| dmx[9..12] == [128, 128, 128]);
     // The live look is unmastered.
     assert!(close(d.live()[0].intensity.into(), 1.0));
     for bad in [float(1.5), float(-0.5), string("loud")] {
@@ -173,7 +205,8 @@ fn master_scales_output_and_blackout_zeros_it() {
     assert_eq!(num(&r.args[0]) as i32, 1);
     assert_eq!(d.status().blackout, 1);
     for u in [1, 2] {
-        d.wire.wait_both(u, "all zeros", |dmx| dmx.iter().all(|&b| b == 0));
+        d.wire
+            .wait_both(u, "all zeros", |dmx| dmx.iter().all(|&b| b == 0));
     }
     for bad in [int(2), string("on"), float(0.5)] {
         d.refused("/vo/blackout", vec![bad]);
@@ -198,7 +231,10 @@ fn ping_and_status() {
     let s = d.status();
     assert_eq!(s.scene, "test scene");
     assert_eq!(s.lights, STAGE.len() as i32);
-    assert_eq!((s.objectives, s.candidates, s.clusters, s.entry), (0, 0, 0, 0));
+    assert_eq!(
+        (s.objectives, s.candidates, s.clusters, s.entry),
+        (0, 0, 0, 0)
+    );
     assert_eq!((s.fade, s.blackout, s.master), (0.0, 0, 1.0));
     d.refused("/vo/statuss", vec![]);
     d.refused("/vo/ping/pong", vec![]);
@@ -211,7 +247,11 @@ fn subscribe_sends_the_state_then_changes() {
     let mut tablet = d.client();
     let mut listen = d.client();
     let port = i32::from(listen.port());
-    d.ok("/vo/look/save", vec![int(3), string("pre")], "/vo/look/saved");
+    d.ok(
+        "/vo/look/save",
+        vec![int(3), string("pre")],
+        "/vo/look/saved",
+    );
 
     let got = tablet.call("/vo/subscribe", vec![int(port)], "/vo/subscribed");
     assert_eq!(got.len(), 1, "{got:?}");

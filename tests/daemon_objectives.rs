@@ -28,7 +28,11 @@ fn listed(m: &OscMessage) -> (i32, String, String, [f64; 4]) {
 fn add_measures_the_image_and_lists_it() {
     let mut d = Daemon::start("obj-add");
     // Uniform sRGB 128 grey: L* 53.59 everywhere; nothing is brighter than the mean.
-    let r = d.ok("/vo/objective/add", vec![string("grey.png")], "/vo/objective/added");
+    let r = d.ok(
+        "/vo/objective/add",
+        vec![string("grey.png")],
+        "/vo/objective/added",
+    );
     assert_eq!(r.args.len(), 5, "{r:?}");
     let grey = num(&r.args[0]) as i32;
     assert_eq!(text(&r.args[1]), "both", "aspects default to both");
@@ -51,12 +55,23 @@ fn add_measures_the_image_and_lists_it() {
     assert_eq!(d.status().objectives, 3);
     let list: Vec<_> = d.objectives().iter().map(listed).collect();
     assert_eq!(list.len(), 3);
-    assert_eq!(list[0], (grey, "grey.png".into(), "both".into(), [0.0, 0.0, 1.0, 1.0]));
+    assert_eq!(
+        list[0],
+        (grey, "grey.png".into(), "both".into(), [0.0, 0.0, 1.0, 1.0])
+    );
     assert_eq!(
         list[1],
-        (split, "split.png".into(), "intensity".into(), [0.0, 0.0, 1.0, 1.0])
+        (
+            split,
+            "split.png".into(),
+            "intensity".into(),
+            [0.0, 0.0, 1.0, 1.0]
+        )
     );
-    assert_eq!((list[2].1.as_str(), list[2].2.as_str()), ("warm.png", "color"));
+    assert_eq!(
+        (list[2].1.as_str(), list[2].2.as_str()),
+        ("warm.png", "color")
+    );
 }
 
 #[test]
@@ -74,7 +89,10 @@ fn add_refuses_bad_arguments() {
         d.refused("/vo/objective/add", args);
     }
     let sentence = d.err("/vo/objective/add", vec![string("missing.png")]);
-    assert!(sentence.contains("missing.png"), "names the file: {sentence}");
+    assert!(
+        sentence.contains("missing.png"),
+        "names the file: {sentence}"
+    );
 }
 
 /// A PNG whose header claims 9000x9000 (81 megapixels) with no pixel data behind it.
@@ -84,7 +102,11 @@ fn huge_png(path: &Path) {
         for &b in bytes {
             c ^= u32::from(b);
             for _ in 0..8 {
-                c = if c & 1 != 0 { 0xedb8_8320 ^ (c >> 1) } else { c >> 1 };
+                c = if c & 1 != 0 {
+                    0xedb8_8320 ^ (c >> 1)
+                } else {
+                    c >> 1
+                };
             }
         }
         !c
@@ -143,7 +165,10 @@ fn aspects_change_and_refuse() {
             vec![string(a)],
             "/vo/objective/aspects",
         );
-        assert_eq!((num(&r.args[0]) as i32, text(&r.args[1])), (id, a.to_string()));
+        assert_eq!(
+            (num(&r.args[0]) as i32, text(&r.args[1])),
+            (id, a.to_string())
+        );
         assert_eq!(listed(&d.objectives()[0]).2, a);
     }
     d.ok(
@@ -154,7 +179,10 @@ fn aspects_change_and_refuse() {
     for args in [vec![string("loud")], vec![int(2)], vec![]] {
         d.refused(&format!("/vo/objective/{id}/aspects"), args);
     }
-    d.refused(&format!("/vo/objective/{}/aspects", id + 100), vec![string("both")]);
+    d.refused(
+        &format!("/vo/objective/{}/aspects", id + 100),
+        vec![string("both")],
+    );
 }
 
 #[test]
@@ -163,15 +191,27 @@ fn region_selects_lights_and_refuses_nonsense() {
     let id = d.add_objective("warm.png", "both");
     let addr = format!("/vo/objective/{id}/region");
     // Stripes of 8 of 48 pixels: the left half is lights 1-3, the right half 4-6.
-    for (region, lights) in [([0.0, 0.0, 0.5, 1.0], 3), ([0.5, 0.0, 1.0, 1.0], 3), ([0.0, 0.0, 1.0, 1.0], 6)] {
-        let r = d.ok(&addr, region.iter().map(|&v| float(v)).collect(), "/vo/objective/region");
+    for (region, lights) in [
+        ([0.0, 0.0, 0.5, 1.0], 3),
+        ([0.5, 0.0, 1.0, 1.0], 3),
+        ([0.0, 0.0, 1.0, 1.0], 6),
+    ] {
+        let r = d.ok(
+            &addr,
+            region.iter().map(|&v| float(v)).collect(),
+            "/vo/objective/region",
+        );
         let v: Vec<f64> = r.args.iter().map(num).collect();
         assert_eq!(v.len(), 6, "{r:?}");
         assert_eq!(v[0] as i32, id);
         assert_eq!([v[1], v[2], v[3], v[4]], region.map(f64::from));
         assert_eq!(v[5] as i32, lights, "lights selected by {region:?}");
     }
-    d.ok(&addr, [0.0, 0.0, 0.5, 1.0].map(float).to_vec(), "/vo/objective/region");
+    d.ok(
+        &addr,
+        [0.0, 0.0, 0.5, 1.0].map(float).to_vec(),
+        "/vo/objective/region",
+    );
     assert_eq!(listed(&d.objectives()[0]).3, [0.0, 0.0, 0.5, 1.0]);
     // No arguments: the whole stage.
     let r = d.ok(&addr, vec![], "/vo/objective/region");
@@ -196,7 +236,10 @@ fn region_selects_lights_and_refuses_nonsense() {
 fn palette(m: &OscMessage, id: i32) -> Vec<([f64; 3], f64)> {
     assert_eq!(num(&m.args[0]) as i32, id, "{m:?}");
     let rest = &m.args[1..];
-    assert!(!rest.is_empty() && rest.len() % 4 == 0, "r g b w each: {m:?}");
+    assert!(
+        !rest.is_empty() && rest.len().is_multiple_of(4),
+        "r g b w each: {m:?}"
+    );
     rest.chunks(4)
         .map(|c| ([num(&c[0]), num(&c[1]), num(&c[2])], num(&c[3])))
         .collect()
@@ -206,7 +249,11 @@ fn palette(m: &OscMessage, id: i32) -> Vec<([f64; 3], f64)> {
 fn palette_and_colour_edit() {
     let mut d = Daemon::start("obj-palette");
     let id = d.add_objective("cool.png", "both");
-    let r = d.ok(&format!("/vo/objective/{id}/palette"), vec![], "/vo/objective/palette");
+    let r = d.ok(
+        &format!("/vo/objective/{id}/palette"),
+        vec![],
+        "/vo/objective/palette",
+    );
     let p = palette(&r, id);
     let total: f64 = p.iter().map(|(_, w)| w).sum();
     assert!(near(total, 1.0, 0.01), "weights sum to 1: {p:?}");
@@ -215,13 +262,24 @@ fn palette_and_colour_edit() {
     assert!(mean[2] > 0.9 && mean[0] < 0.3 && mean[1] < 0.5, "{p:?}");
 
     let addr = format!("/vo/objective/{id}/color");
-    let r = d.ok(&addr, vec![int(1), float(1.0), float(0.5), float(0.0)], "/vo/objective/palette");
+    let r = d.ok(
+        &addr,
+        vec![int(1), float(1.0), float(0.5), float(0.0)],
+        "/vo/objective/palette",
+    );
     let q = palette(&r, id);
     assert_eq!(q.len(), p.len());
     assert!(near(q[0].0[0], 1.0, 1e-3) && near(q[0].0[1], 0.5, 1e-3) && near(q[0].0[2], 0.0, 1e-3));
     assert_eq!(q[1..], p[1..], "the other colours stay");
-    assert!(q.iter().zip(&p).all(|(a, b)| near(a.1, b.1, 1e-6)), "weights stay");
-    let again = d.ok(&format!("/vo/objective/{id}/palette"), vec![], "/vo/objective/palette");
+    assert!(
+        q.iter().zip(&p).all(|(a, b)| near(a.1, b.1, 1e-6)),
+        "weights stay"
+    );
+    let again = d.ok(
+        &format!("/vo/objective/{id}/palette"),
+        vec![],
+        "/vo/objective/palette",
+    );
     assert_eq!(palette(&again, id), q);
 
     let k_past = p.len() as i32 + 1;
@@ -241,7 +299,11 @@ fn palette_and_colour_edit() {
         vec![int(1), float(1.0), float(0.0), float(0.0)],
     );
     // The palette is unchanged by all that.
-    let r = d.ok(&format!("/vo/objective/{id}/palette"), vec![], "/vo/objective/palette");
+    let r = d.ok(
+        &format!("/vo/objective/{id}/palette"),
+        vec![],
+        "/vo/objective/palette",
+    );
     assert_eq!(palette(&r, id), q);
 }
 
@@ -251,7 +313,11 @@ fn remove_clear_and_list() {
     let a = d.add_objective("warm.png", "both");
     let b = d.add_objective("cool.png", "color");
     let c = d.add_objective("grey.png", "intensity");
-    let r = d.ok(&format!("/vo/objective/{b}/remove"), vec![], "/vo/objective/removed");
+    let r = d.ok(
+        &format!("/vo/objective/{b}/remove"),
+        vec![],
+        "/vo/objective/removed",
+    );
     assert_eq!(num(&r.args[0]) as i32, b);
     let ids: Vec<i32> = d.objectives().iter().map(|m| listed(m).0).collect();
     assert_eq!(ids, [a, c]);

@@ -227,7 +227,10 @@ pub fn same_look(a: &[Light], b: &[Light], tol: f32) -> bool {
         && a.iter().zip(b).all(|(x, y)| {
             x.ch == y.ch
                 && (x.intensity - y.intensity).abs() <= tol
-                && x.color.iter().zip(y.color).all(|(p, q)| (p - q).abs() <= tol)
+                && x.color
+                    .iter()
+                    .zip(y.color)
+                    .all(|(p, q)| (p - q).abs() <= tol)
         })
 }
 
@@ -331,7 +334,8 @@ pub trait Osc {
         let mut got = self.call(addr, args, reply);
         let last = got.pop().expect("a reply");
         assert_eq!(
-            last.addr, reply,
+            last.addr,
+            reply,
             "{what} was refused: {:?}\n--- daemon log ---\n{}",
             last.args,
             self.log()
@@ -353,11 +357,11 @@ pub trait Osc {
         );
         assert_eq!(last.args.len(), 2, "/vo/error address message: {last:?}");
         let (a, sentence) = (text(&last.args[0]), text(&last.args[1]));
+        assert!(names_address(&a, addr), "the error names {a}, not {addr}");
         assert!(
-            names_address(&a, addr),
-            "the error names {a}, not {addr}"
+            sentence.trim().len() > 5,
+            "an actionable sentence: {last:?}"
         );
-        assert!(sentence.trim().len() > 5, "an actionable sentence: {last:?}");
         let extra = self.fence();
         assert!(extra.is_empty(), "{what}: more after the error: {extra:?}");
         sentence
@@ -772,9 +776,10 @@ impl Wire {
                         match got {
                             Ok(Some((u, f))) => log.frames.entry((proto, u)).or_default().push(f),
                             Ok(None) => {}
-                            Err(_) => log
-                                .malformed
-                                .push(format!("{proto:?} packet of {n} bytes: {:02x?}", &p[..n.min(40)])),
+                            Err(_) => log.malformed.push(format!(
+                                "{proto:?} packet of {n} bytes: {:02x?}",
+                                &p[..n.min(40)]
+                            )),
                         }
                     }
                 })
@@ -808,7 +813,9 @@ impl Wire {
     pub fn latest(&self, proto: Proto, universe: u16) -> Option<Frame> {
         self.check();
         let log = self.log.lock().expect("log");
-        log.frames.get(&(proto, universe)).and_then(|v| v.last().cloned())
+        log.frames
+            .get(&(proto, universe))
+            .and_then(|v| v.last().cloned())
     }
 
     /// Waits (bounded) until the latest frame of `universe` from `proto` satisfies `want`;
@@ -909,7 +916,9 @@ impl Wire {
         loop {
             let done = {
                 let log = self.log.lock().expect("log");
-                PROTOS.iter().all(|p| log.idle.get(p).is_some_and(|&i| i > t))
+                PROTOS
+                    .iter()
+                    .all(|p| log.idle.get(p).is_some_and(|&i| i > t))
             };
             if done {
                 return;
@@ -988,7 +997,11 @@ pub fn look_mismatch(look: &[Light], dmx: &BTreeMap<u16, Vec<u8>>) -> Option<Str
             (Some(a), Some(b)) => (a - b).abs() <= STEP,
             _ => true,
         };
-        let e_ok = d.emitters.iter().zip(want_e).all(|(a, b)| (a - b).abs() <= tol);
+        let e_ok = d
+            .emitters
+            .iter()
+            .zip(want_e)
+            .all(|(a, b)| (a - b).abs() <= tol);
         if !(i_ok && e_ok) {
             return Some(format!(
                 "channel {} ({}): wire says {d:?}, the look wants intensity {want_i:?} emitters {want_e:?} ({l:?})",
@@ -1074,7 +1087,11 @@ impl Daemon {
         let end = Instant::now() + Duration::from_secs(10);
         let token = TOKEN.fetch_add(1, Ordering::Relaxed);
         while Instant::now() < end {
-            if let Some(status) = self.child.as_mut().and_then(|c| c.try_wait().ok().flatten()) {
+            if let Some(status) = self
+                .child
+                .as_mut()
+                .and_then(|c| c.try_wait().ok().flatten())
+            {
                 self.child = None;
                 return Err(format!("exited with {status}:\n{}", log_tail(&self.log)));
             }
@@ -1088,10 +1105,7 @@ impl Daemon {
             }
         }
         self.kill();
-        Err(format!(
-            "no /vo/pong within 10 s:\n{}",
-            log_tail(&self.log)
-        ))
+        Err(format!("no /vo/pong within 10 s:\n{}", log_tail(&self.log)))
     }
 
     /// The references folder.
