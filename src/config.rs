@@ -254,6 +254,17 @@ mod tests {
     }
 
     #[test]
+    fn shipped_configs_are_valid() {
+        for (name, text) in [
+            ("visobjd.toml", include_str!("../config/visobjd.toml")),
+            ("booth.toml", include_str!("../config/booth.toml")),
+        ] {
+            let c = Config::parse(Path::new(name), text).unwrap();
+            c.output.validate(&[1, 2]).unwrap();
+        }
+    }
+
+    #[test]
     fn unknown_keys_name_the_key_and_line() {
         let e =
             Config::parse(Path::new("c.toml"), "scene = \"x\"\n[osc]\nudpp = \"1\"\n").unwrap_err();

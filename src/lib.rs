@@ -2,9 +2,11 @@
 
 pub mod basis;
 pub mod cli;
+pub mod cmd;
 pub mod color;
 pub mod config;
 pub mod dmx;
+pub mod engine;
 pub mod gallery;
 pub mod look;
 pub mod objective;

@@ -3,6 +3,7 @@
 mod check;
 mod gallery;
 mod render;
+mod run;
 mod send;
 
 use clap::{ArgMatches, CommandFactory, FromArgMatches, Parser, Subcommand};
@@ -17,6 +18,8 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// The daemon: loads the scene, listens for OSC, outputs DMX until SIGINT/SIGTERM.
+    Run(run::Args),
     /// Offline: one generate from reference images, written as a contact sheet (and JSON).
     Gallery(gallery::Args),
     /// Renders one look file to a PNG.
@@ -49,6 +52,7 @@ pub fn main() -> std::process::ExitCode {
         .map(|(_, m)| m)
         .expect("clap requires a subcommand");
     let result = match cli.command {
+        Command::Run(args) => run::run(args),
         Command::Gallery(args) => gallery::run(args, sub),
         Command::Render(args) => render::run(args),
         Command::Check(args) => check::run(args),

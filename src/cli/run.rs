@@ -1,0 +1,133 @@
+//! `visobjd run`: the daemon.
+//!
+//! Start-up order keeps the stage lit: the scene description (fast) and the saved live look
+//! come first and the DMX output starts sending it at once, before the basis images are
+//! read; only then does OSC open. sACN receivers hold a source for 2.5 s, so a restart
+//! never drops the stage.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use anyhow::Context;
+
+use crate::config::Config;
+use crate::dmx::Patch;
+use crate::engine::persist::{Files, restore_live};
+use crate::engine::session::Session;
+use crate::engine::{Engine, EngineHandler};
+use crate::look::Look;
+use crate::osc::Server;
+use crate::output::Output;
+use crate::scene::Scene;
+use crate::stage::{Stage, THUMB_WIDTH};
+
+/// Arguments of `run`.
+#[derive(clap::Args)]
+pub struct Args {
+    /// The config file.
+    #[arg(long, default_value = "config/visobjd.toml")]
+    config: PathBuf,
+    /// Log filter when RUST_LOG is not set (error, warn, info, debug, trace).
+    #[arg(long, default_value = "info")]
+    log_level: String,
+}
+
+/// Runs the daemon until SIGINT or SIGTERM.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .or_else(|_| tracing_subscriber::EnvFilter::try_new(&args.log_level))
+        .context("--log-level: not a log filter")?;
+    tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+        .with_target(false)
+        .init();
+
+    let config = Config::load(&args.config).map_err(anyhow::Error::msg)?;
+    let scene = Scene::load(&config.scene)?;
+    std::fs::create_dir_all(&config.state_dir)
+        .with_context(|| format!("state_dir {}: cannot create it", config.state_dir.display()))?;
+
+    // The stage first: the saved live look goes out before anything slow happens.
+    let files = Files::new(&config.state_dir);
+    let live = restore_live(&files);
+    let initial = live
+        .as_ref()
+        .and_then(|l| l.live.to_look(&scene).ok())
+        .unwrap_or_else(|| Look::off(scene.lights.len()));
+    let output = Output::start(
+        &config.output,
+        Patch::new(&scene),
+        &config.state_dir,
+        initial,
+    )?;
+    if let Some(l) = &live {
+        output.set_master(l.master.clamp(0.0, 1.0));
+        output.set_blackout(l.blackout);
+    }
+    tracing::info!(
+        "DMX output running: {} universes, {} sACN and {} Art-Net destinations",
+        Patch::new(&scene).universes().len(),
+        config.output.sacn.len(),
+        config.output.artnet.len()
+    );
+
+    let started = std::time::Instant::now();
+    let session = Session::new(
+        &scene,
+        config.generate.count,
+        config.generate.clusters,
+        config.output.fade_s,
+    );
+    let stage = Arc::new(Stage::from_scene(scene, THUMB_WIDTH)?);
+    tracing::info!(
+        "scene `{}` loaded: {} lights at {}x{} in {:.1} s",
+        stage.scene.name,
+        stage.scene.lights.len(),
+        stage.thumbs.width,
+        stage.thumbs.height,
+        started.elapsed().as_secs_f32()
+    );
+    let engine = Arc::new(Engine::new(&config, stage, output, session)?);
+
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .context("cannot start the async runtime")?;
+    let result = runtime.block_on(serve(&config, &engine));
+    engine.shutdown();
+    tracing::info!("stopped");
+    result
+}
+
+async fn serve(config: &Config, engine: &Arc<Engine>) -> anyhow::Result<()> {
+    use tokio::signal::unix::{SignalKind, signal};
+    let server = Server::start(&config.osc, Arc::new(EngineHandler(Arc::clone(engine))))
+        .map_err(anyhow::Error::msg)?;
+    if let Some(sender) = server.sender() {
+        engine.set_push(sender);
+    }
+    let _ = sd_notify::notify(&[sd_notify::NotifyState::Ready]);
+    if let Some(period) = sd_notify::watchdog_enabled() {
+        // Ping at half the watchdog period from the runtime: if OSC handling wedges the
+        // runtime, systemd restarts the daemon.
+        tokio::spawn(async move {
+            let mut tick = tokio::time::interval(period / 2);
+            loop {
+                tick.tick().await;
+                let _ = sd_notify::notify(&[sd_notify::NotifyState::Watchdog]);
+            }
+        });
+    }
+    let mut term = signal(SignalKind::terminate()).context("cannot watch SIGTERM")?;
+    let mut int = signal(SignalKind::interrupt()).context("cannot watch SIGINT")?;
+    tokio::select! {
+        _ = term.recv() => tracing::info!("SIGTERM: stopping"),
+        _ = int.recv() => tracing::info!("SIGINT: stopping"),
+    }
+    let _ = sd_notify::notify(&[sd_notify::NotifyState::Stopping]);
+    server.stop().await;
+    Ok(())
+}

@@ -1,0 +1,144 @@
+//! The live look by hand: faders for lights and groups (no fade, live and base at once),
+//! `/vo/live`, `/vo/fade`, `/vo/master`, `/vo/blackout`.
+
+use std::sync::Arc;
+
+use rosc::{OscMessage, OscType};
+
+use super::{group, int, light, light_args, num_arg, one_light, rgb_args, switch_arg, text};
+use crate::engine::session::Change;
+use crate::engine::{Engine, msg};
+use crate::osc::args::Request;
+
+/// What a fader sets.
+#[derive(Clone, Copy)]
+pub enum Set {
+    Intensity(f32),
+    Color([f32; 3]),
+}
+
+/// Which lights a fader moves.
+pub enum Target {
+    Light(String),
+    Group(String),
+}
+
+pub enum Cmd {
+    Fader(Target, Set),
+    Live,
+    Fade(f32),
+    Master(f32),
+    Blackout(bool),
+}
+
+fn set(req: &Request, what: &str) -> Result<Option<Set>, String> {
+    Ok(Some(match what {
+        "intensity" => Set::Intensity(num_arg(req, 0, "intensity", 0.0, 1.0)?),
+        "level" => Set::Intensity(num_arg(req, 0, "level (percent)", 0.0, 100.0)? / 100.0),
+        "color" | "colour" => Set::Color(rgb_args(req, 0)?),
+        _ => return Ok(None),
+    }))
+}
+
+impl Cmd {
+    pub fn parse(req: &Request) -> Result<Option<Cmd>, String> {
+        if let Some(c) = req.matches("/vo/light/*/*") {
+            return Ok(set(req, c[1])?.map(|v| Cmd::Fader(Target::Light(c[0].into()), v)));
+        }
+        if let Some(c) = req.matches("/vo/group/*/*") {
+            return Ok(set(req, c[1])?.map(|v| Cmd::Fader(Target::Group(c[0].into()), v)));
+        }
+        Ok(Some(if req.matches("/vo/live").is_some() {
+            Cmd::Live
+        } else if req.matches("/vo/fade").is_some() {
+            Cmd::Fade(num_arg(req, 0, "fade seconds", 0.0, 600.0)?)
+        } else if req.matches("/vo/master").is_some() {
+            Cmd::Master(num_arg(req, 0, "master", 0.0, 1.0)?)
+        } else if req.matches("/vo/blackout").is_some() {
+            Cmd::Blackout(switch_arg(req, "blackout")?)
+        } else {
+            return Ok(None);
+        }))
+    }
+
+    pub fn apply(self, e: &Arc<Engine>) -> Result<Vec<OscMessage>, String> {
+        let scene = &e.stage.scene;
+        let mut s = e.session();
+        let (reply, wait) = match self {
+            Cmd::Fader(target, value) => {
+                let lights = match &target {
+                    Target::Light(ch) => vec![light(scene, ch)?],
+                    Target::Group(name) => scene.groups[group(scene, name)?].lights.clone(),
+                };
+                let coloured: Vec<usize> = match value {
+                    Set::Color(_) => lights
+                        .iter()
+                        .copied()
+                        .filter(|&l| scene.profile(l).has_colour())
+                        .collect(),
+                    Set::Intensity(_) => lights.clone(),
+                };
+                if coloured.is_empty() {
+                    return Err(match &target {
+                        Target::Light(_) => format!(
+                            "light {} is a `{}` and has no colour",
+                            scene.lights[lights[0]].channel,
+                            scene.profile(lights[0]).name
+                        ),
+                        Target::Group(name) => format!("group `{name}` has no light with colour"),
+                    });
+                }
+                let mut look = s.live.clone();
+                for &l in &coloured {
+                    match value {
+                        Set::Intensity(v) => look.levels[l].intensity = v,
+                        Set::Color(c) => look.levels[l].color = c,
+                    }
+                }
+                s.set_base(look, Change::Fader);
+                s.entry = None;
+                e.show(&s, 0.0);
+                let reply = match target {
+                    Target::Light(_) => {
+                        let l = coloured[0];
+                        msg(
+                            "/vo/light",
+                            one_light(scene.lights[l].channel, &s.live.levels[l]).to_vec(),
+                        )
+                    }
+                    Target::Group(name) => {
+                        let g = group(scene, &name)?;
+                        msg(
+                            "/vo/group",
+                            vec![text(&scene.groups[g].name), int(coloured.len())],
+                        )
+                    }
+                };
+                (reply, false)
+            }
+            Cmd::Live => {
+                let mut a = Vec::with_capacity(scene.lights.len() * 5);
+                a.extend(light_args(scene, &s.live));
+                return Ok(vec![msg("/vo/live", a)]);
+            }
+            Cmd::Fade(v) => {
+                s.fade_s = v;
+                (msg("/vo/fade", vec![OscType::Float(v)]), true)
+            }
+            Cmd::Master(v) => {
+                s.master = v;
+                e.show_master(&s);
+                (msg("/vo/master", vec![OscType::Float(v)]), false)
+            }
+            Cmd::Blackout(on) => {
+                s.blackout = on;
+                e.show_master(&s);
+                (msg("/vo/blackout", vec![int(on.into())]), true)
+            }
+        };
+        let status = e.status(&s);
+        e.persist(s, wait);
+        e.notify(&[status]);
+        Ok(vec![reply])
+    }
+}

@@ -1,0 +1,99 @@
+//! Saved looks: `/vo/look/save`, `/vo/look/recall`, `/vo/look/delete`, `/vo/looks`.
+//! Saved looks are on disk before the reply goes out.
+
+use std::sync::Arc;
+
+use rosc::OscMessage;
+
+use super::{int, int_arg, text};
+use crate::engine::session::Change;
+use crate::engine::{Engine, msg};
+use crate::look::LookFile;
+use crate::osc::args::{self, Request};
+
+/// Largest look number (osc.md).
+const MAX_LOOK: i64 = 9999;
+
+pub enum Cmd {
+    Save { n: u32, label: Option<String> },
+    Recall(u32),
+    Delete(u32),
+    List,
+}
+
+impl Cmd {
+    pub fn parse(req: &Request) -> Result<Option<Cmd>, String> {
+        let n = |req: &Request| int_arg(req, 0, "look number", 1, MAX_LOOK).map(|n| n as u32);
+        Ok(Some(if req.matches("/vo/look/save").is_some() {
+            let label = match req.args.get(1) {
+                Some(a) => Some(args::string(a, "label")?.to_string()),
+                None => None,
+            };
+            Cmd::Save { n: n(req)?, label }
+        } else if req.matches("/vo/look/recall").is_some() {
+            Cmd::Recall(n(req)?)
+        } else if req.matches("/vo/look/delete").is_some() {
+            Cmd::Delete(n(req)?)
+        } else if req.matches("/vo/looks").is_some() {
+            Cmd::List
+        } else {
+            return Ok(None);
+        }))
+    }
+
+    pub fn apply(self, e: &Arc<Engine>) -> Result<Vec<OscMessage>, String> {
+        let scene = &e.stage.scene;
+        let mut s = e.session();
+        match self {
+            Cmd::Save { n, label } => {
+                let label = label.unwrap_or_else(|| format!("Look {n}"));
+                let file = LookFile::from_look(scene, &s.live, &label);
+                let previous = s.looks.insert(n, file);
+                if let Err(err) = e.save_looks(&s) {
+                    // Nothing changes when the save fails.
+                    match previous {
+                        Some(p) => s.looks.insert(n, p),
+                        None => s.looks.remove(&n),
+                    };
+                    return Err(format!("look {n} was not saved: {err}"));
+                }
+                Ok(vec![msg("/vo/look/saved", vec![int(n as usize)])])
+            }
+            Cmd::Recall(n) => {
+                let file = s.looks.get(&n).ok_or_else(|| missing(n))?;
+                let look = file.to_look(scene)?;
+                s.set_base(look, Change::Step);
+                s.entry = None;
+                e.show(&s, s.fade_s);
+                let status = e.status(&s);
+                e.persist(s, true);
+                e.notify(&[status]);
+                Ok(vec![msg("/vo/look/recalled", vec![int(n as usize)])])
+            }
+            Cmd::Delete(n) => {
+                let previous = s.looks.remove(&n).ok_or_else(|| missing(n))?;
+                if let Err(err) = e.save_looks(&s) {
+                    s.looks.insert(n, previous);
+                    return Err(format!("look {n} was not deleted: {err}"));
+                }
+                Ok(vec![msg("/vo/look/deleted", vec![int(n as usize)])])
+            }
+            Cmd::List => Ok(list(&s)),
+        }
+    }
+}
+
+/// One `/vo/look n label` per saved look, then `/vo/looks/end count`.
+pub fn list(s: &crate::engine::session::Session) -> Vec<OscMessage> {
+    let mut out: Vec<OscMessage> = s
+        .looks
+        .iter()
+        .map(|(n, f)| msg("/vo/look", vec![int(*n as usize), text(&f.label)]))
+        .collect();
+    out.push(msg("/vo/looks/end", vec![int(s.looks.len())]));
+    out
+}
+
+fn missing(n: u32) -> String {
+    format!("there is no saved look {n}")
+}

@@ -1,0 +1,232 @@
+//! `/vo/objective/...` and `/vo/objectives`: reference images and what to take from them.
+
+use std::sync::Arc;
+
+use rosc::{OscMessage, OscType};
+
+use super::{int, int_arg, num_arg, rgb_args, text};
+use crate::engine::session::Entry;
+use crate::engine::{Engine, msg};
+use crate::objective::{Aspects, Objective, Region};
+use crate::osc::args::{self, Request};
+
+pub enum Cmd {
+    Add { image: String, aspects: Aspects },
+    Aspects { id: u32, aspects: Aspects },
+    Region { id: u32, region: Region },
+    Palette { id: u32 },
+    Color { id: u32, k: usize, rgb: [f32; 3] },
+    Remove { id: u32 },
+    Clear,
+    List,
+}
+
+fn id(segment: &str) -> Result<u32, String> {
+    segment
+        .parse::<u32>()
+        .map_err(|_| format!("objective `{segment}` is not an objective number"))
+}
+
+fn aspects(req: &Request, i: usize) -> Result<Aspects, String> {
+    match req.args.get(i) {
+        None => Ok(Aspects::Both),
+        Some(a) => Aspects::parse(args::string(a, "aspects")?),
+    }
+}
+
+impl Cmd {
+    pub fn parse(req: &Request) -> Result<Option<Cmd>, String> {
+        if req.matches("/vo/objective/add").is_some() {
+            let image = args::string(args::required(&req.args, 0, "image")?, "image")?;
+            return Ok(Some(Cmd::Add {
+                image: image.to_string(),
+                aspects: aspects(req, 1)?,
+            }));
+        }
+        if req.matches("/vo/objective/clear").is_some() {
+            return Ok(Some(Cmd::Clear));
+        }
+        if req.matches("/vo/objectives").is_some() {
+            return Ok(Some(Cmd::List));
+        }
+        let Some(captures) = req.matches("/vo/objective/*/*") else {
+            return Ok(None);
+        };
+        let (seg, what) = (captures[0], captures[1]);
+        Ok(Some(match what {
+            "aspects" => Cmd::Aspects {
+                id: id(seg)?,
+                aspects: Aspects::parse(args::string(
+                    args::required(&req.args, 0, "aspects")?,
+                    "aspects",
+                )?)?,
+            },
+            "region" => Cmd::Region {
+                id: id(seg)?,
+                region: if req.args.is_empty() {
+                    Region::FULL
+                } else {
+                    Region::new(
+                        num_arg(req, 0, "x0", 0.0, 1.0)?,
+                        num_arg(req, 1, "y0", 0.0, 1.0)?,
+                        num_arg(req, 2, "x1", 0.0, 1.0)?,
+                        num_arg(req, 3, "y1", 0.0, 1.0)?,
+                    )?
+                },
+            },
+            "palette" => Cmd::Palette { id: id(seg)? },
+            "color" | "colour" => Cmd::Color {
+                id: id(seg)?,
+                k: int_arg(req, 0, "palette colour number", 1, 64)? as usize,
+                rgb: rgb_args(req, 1)?,
+            },
+            "remove" => Cmd::Remove { id: id(seg)? },
+            _ => return Ok(None),
+        }))
+    }
+
+    pub fn apply(self, e: &Arc<Engine>) -> Result<Vec<OscMessage>, String> {
+        match self {
+            Cmd::Add { image, aspects } => {
+                let objective = e.load_reference(&image, aspects)?;
+                let mut s = e.session();
+                let id = s.next_id;
+                s.next_id += 1;
+                let st = objective.analysis.stats;
+                s.objectives.push(Entry { id, objective });
+                let status = e.status(&s);
+                e.persist(s, true);
+                e.notify(&[status]);
+                Ok(vec![msg(
+                    "/vo/objective/added",
+                    vec![
+                        int(id as usize),
+                        text(aspects.name()),
+                        OscType::Float(st.mean_l),
+                        OscType::Float(st.key_l),
+                        OscType::Float(st.bright),
+                    ],
+                )])
+            }
+            Cmd::Aspects { id, aspects } => {
+                let mut s = e.session();
+                let i = find(&s, id)?;
+                s.objectives[i].objective.aspects = aspects;
+                e.persist(s, true);
+                Ok(vec![msg(
+                    "/vo/objective/aspects",
+                    vec![int(id as usize), text(aspects.name())],
+                )])
+            }
+            Cmd::Region { id, region } => {
+                let lights = e
+                    .stage
+                    .footprints
+                    .select(region)
+                    .iter()
+                    .filter(|&&on| on)
+                    .count();
+                let mut s = e.session();
+                let i = find(&s, id)?;
+                s.objectives[i].objective.region = region;
+                e.persist(s, true);
+                Ok(vec![msg(
+                    "/vo/objective/region",
+                    vec![
+                        int(id as usize),
+                        OscType::Float(region.x0),
+                        OscType::Float(region.y0),
+                        OscType::Float(region.x1),
+                        OscType::Float(region.y1),
+                        int(lights),
+                    ],
+                )])
+            }
+            Cmd::Palette { id } => {
+                let s = e.session();
+                let i = find(&s, id)?;
+                Ok(vec![palette(id, &s.objectives[i].objective)])
+            }
+            Cmd::Color { id, k, rgb } => {
+                let mut s = e.session();
+                let i = find(&s, id)?;
+                let colors = &mut s.objectives[i].objective.analysis.palette;
+                let n = colors.len();
+                let c = colors.get_mut(k - 1).ok_or_else(|| {
+                    format!("objective {id} has no palette colour {k} (colours 1-{n})")
+                })?;
+                c.color = rgb;
+                let reply = palette(id, &s.objectives[i].objective);
+                e.persist(s, true);
+                Ok(vec![reply])
+            }
+            Cmd::Remove { id } => {
+                let mut s = e.session();
+                let i = find(&s, id)?;
+                s.objectives.remove(i);
+                let status = e.status(&s);
+                e.persist(s, true);
+                e.notify(&[status]);
+                Ok(vec![msg("/vo/objective/removed", vec![int(id as usize)])])
+            }
+            Cmd::Clear => {
+                let mut s = e.session();
+                let n = s.objectives.len();
+                s.objectives.clear();
+                let status = e.status(&s);
+                e.persist(s, true);
+                e.notify(&[status]);
+                Ok(vec![msg("/vo/objective/cleared", vec![int(n)])])
+            }
+            Cmd::List => Ok(list(&e.session())),
+        }
+    }
+}
+
+/// One `/vo/objective` per objective, then `/vo/objectives/end count`.
+pub fn list(s: &crate::engine::session::Session) -> Vec<OscMessage> {
+    let mut out: Vec<OscMessage> = s
+        .objectives
+        .iter()
+        .map(|en| {
+            let o = &en.objective;
+            msg(
+                "/vo/objective",
+                vec![
+                    int(en.id as usize),
+                    text(&o.image),
+                    text(o.aspects.name()),
+                    OscType::Float(o.region.x0),
+                    OscType::Float(o.region.y0),
+                    OscType::Float(o.region.x1),
+                    OscType::Float(o.region.y1),
+                ],
+            )
+        })
+        .collect();
+    out.push(msg("/vo/objectives/end", vec![int(s.objectives.len())]));
+    out
+}
+
+fn find(s: &crate::engine::session::Session, id: u32) -> Result<usize, String> {
+    s.objective_index(id).ok_or_else(|| {
+        let ids: Vec<String> = s.objectives.iter().map(|e| e.id.to_string()).collect();
+        if ids.is_empty() {
+            format!("objective {id} does not exist: there are no objectives")
+        } else {
+            format!(
+                "objective {id} does not exist (objectives: {})",
+                ids.join(", ")
+            )
+        }
+    })
+}
+
+fn palette(id: u32, o: &Objective) -> OscMessage {
+    let mut a = vec![int(id as usize)];
+    for p in &o.analysis.palette {
+        a.extend(p.color.map(OscType::Float));
+        a.push(OscType::Float(p.weight));
+    }
+    msg("/vo/objective/palette", a)
+}

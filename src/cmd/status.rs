@@ -1,0 +1,67 @@
+//! `/vo/ping`, `/vo/status`, subscriptions and the console: `/vo/subscribe`,
+//! `/vo/unsubscribe`, `/vo/eos/preset`.
+
+use std::sync::Arc;
+
+use rosc::OscMessage;
+
+use super::{int, int_arg, opt_int_arg};
+use crate::engine::{Engine, msg};
+use crate::osc::Peer;
+use crate::osc::args::Request;
+
+pub enum Cmd {
+    Ping(Vec<rosc::OscType>),
+    Status,
+    Subscribe(Option<u16>),
+    Unsubscribe,
+    EosPreset(u32),
+}
+
+impl Cmd {
+    pub fn parse(req: &Request) -> Result<Option<Cmd>, String> {
+        Ok(Some(if req.matches("/vo/ping").is_some() {
+            Cmd::Ping(req.args.clone())
+        } else if req.matches("/vo/status").is_some() {
+            Cmd::Status
+        } else if req.matches("/vo/subscribe").is_some() {
+            let port = opt_int_arg(req, 0, "port", 0, 65535, 0)? as u16;
+            Cmd::Subscribe((port != 0).then_some(port))
+        } else if req.matches("/vo/unsubscribe").is_some() {
+            Cmd::Unsubscribe
+        } else if req.matches("/vo/eos/preset").is_some() {
+            Cmd::EosPreset(int_arg(req, 0, "preset number", 1, 9999)? as u32)
+        } else {
+            return Ok(None);
+        }))
+    }
+
+    pub fn apply(self, e: &Arc<Engine>, peer: &Peer) -> Result<Vec<OscMessage>, String> {
+        match self {
+            Cmd::Ping(args) => Ok(vec![msg("/vo/pong", args)]),
+            Cmd::Status => Ok(vec![e.status(&e.session())]),
+            Cmd::Subscribe(port) => {
+                let to = e.subscribe(peer, port);
+                let s = e.session();
+                let mut out = vec![
+                    msg("/vo/subscribed", vec![int(to.port().into())]),
+                    e.status(&s),
+                ];
+                if let Some((k, m)) = s.entry {
+                    out.push(msg("/vo/picked", vec![int(k), int(m)]));
+                }
+                out.push(super::gallery::sizes(&s));
+                out.extend(super::objective::list(&s));
+                out.extend(super::looks::list(&s));
+                Ok(out)
+            }
+            Cmd::Unsubscribe => {
+                e.unsubscribe(peer);
+                Ok(vec![msg("/vo/unsubscribed", Vec::new())])
+            }
+            Cmd::EosPreset(n) => Err(format!(
+                "cannot record preset {n}: no Eos console is configured for this daemon"
+            )),
+        }
+    }
+}

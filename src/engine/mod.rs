@@ -1,0 +1,397 @@
+//! The engine: the daemon's session (objectives, gallery, looks) behind the OSC handler,
+//! wired to the compositor, the DMX output and the state files.
+//!
+//! The session sits behind a mutex held only for the few microseconds a command takes;
+//! a generate copies what it needs, runs on its own thread with no lock held, and installs
+//! its gallery when done. The DMX clock never waits on any of it: it is handed the latest
+//! look through the output's watch channel.
+
+pub mod persist;
+pub mod session;
+
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
+use std::time::{Duration, Instant};
+
+use rand::SeedableRng;
+use rosc::{OscMessage, OscType};
+
+use crate::cmd;
+use crate::config::Config;
+use crate::look::Look;
+use crate::objective::{Objective, decode_reference};
+use crate::osc::{Handler, Peer, Sender};
+use crate::output::Output;
+use crate::sampler::Spread;
+use crate::stage::{GenerateRequest, Stage};
+use persist::{Files, Snapshot, Writer};
+use session::{Gallery, Session};
+
+/// How long a subscription lasts without a message from its subscriber (osc.md).
+const SUBSCRIPTION: Duration = Duration::from_secs(600);
+
+/// A client that asked for state changes.
+#[derive(Debug, Clone)]
+struct Subscriber {
+    /// Who subscribed (its messages renew the subscription).
+    from: std::net::IpAddr,
+    /// Where pushes go.
+    to: SocketAddr,
+    last_seen: Instant,
+}
+
+/// The daemon's state and everything it drives.
+pub struct Engine {
+    /// The loaded scene.
+    pub stage: Arc<Stage>,
+    references: PathBuf,
+    palette_size: usize,
+    spread: Spread,
+    output: Mutex<Option<Output>>,
+    session: Mutex<Session>,
+    generating: AtomicBool,
+    files: Files,
+    writer: Writer,
+    subscribers: Mutex<Vec<Subscriber>>,
+    push: OnceLock<Sender>,
+}
+
+impl Engine {
+    /// An engine over a loaded stage, restored from `state_dir`, driving `output`.
+    pub fn new(
+        config: &Config,
+        stage: Arc<Stage>,
+        output: Output,
+        mut session: Session,
+    ) -> std::io::Result<Engine> {
+        let files = Files::new(&config.state_dir);
+        files.restore(&stage.scene, &mut session);
+        output.set_master(session.master);
+        output.set_blackout(session.blackout);
+        output.set_look(session.live.clone(), 0.0);
+        Ok(Engine {
+            references: config.references.clone(),
+            palette_size: config.generate.palette as usize,
+            spread: Spread {
+                key: config.generate.sigma_key,
+                fill: config.generate.sigma_fill,
+            },
+            output: Mutex::new(Some(output)),
+            session: Mutex::new(session),
+            generating: AtomicBool::new(false),
+            writer: Writer::start(files.clone())?,
+            files,
+            subscribers: Mutex::new(Vec::new()),
+            push: OnceLock::new(),
+            stage,
+        })
+    }
+
+    /// Gives the engine the OSC server's sender, for subscription pushes.
+    pub fn set_push(&self, sender: Sender) {
+        let _ = self.push.set(sender);
+    }
+
+    /// The session, locked. A panic elsewhere never leaves it unusable.
+    pub fn session(&self) -> MutexGuard<'_, Session> {
+        self.session.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// Runs `f` on the output, if it is still running.
+    fn with_output(&self, f: impl FnOnce(&Output)) {
+        let guard = self.output.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some(out) = guard.as_ref() {
+            f(out);
+        }
+    }
+
+    /// Sends the live look of `s` to the output, fading over `fade_s`.
+    pub fn show(&self, s: &Session, fade_s: f32) {
+        self.with_output(|o| o.set_look(s.live.clone(), fade_s));
+    }
+
+    /// Sends master and blackout of `s` to the output (at once; a running fade goes on).
+    pub fn show_master(&self, s: &Session) {
+        self.with_output(|o| {
+            o.set_master(s.master);
+            o.set_blackout(s.blackout);
+        });
+    }
+
+    /// Persists the session. With `wait`, returns only once it is on disk (bounded), for
+    /// discrete changes a restart must not lose; call it with the session unlocked.
+    pub fn persist(&self, s: MutexGuard<'_, Session>, wait: bool) {
+        let ticket = self.writer.save(Snapshot::of(&self.stage.scene, &s));
+        drop(s);
+        if wait {
+            self.writer.wait(ticket);
+        }
+    }
+
+    /// Writes saved looks now; the error is a sentence for `/vo/error`.
+    pub fn save_looks(&self, s: &Session) -> Result<(), String> {
+        self.files
+            .save_looks(&s.looks)
+            .map_err(|e| format!("cannot write the saved looks in the state folder: {e}"))
+    }
+
+    /// Stops the output: three Stream_Terminated packets per sACN universe.
+    pub fn shutdown(&self) {
+        let out = self.output.lock().unwrap_or_else(|p| p.into_inner()).take();
+        if let Some(out) = out {
+            out.shutdown();
+        }
+    }
+
+    /// Reads and analyses a reference image from the references folder, refusing paths
+    /// that lead outside it (absolute paths, `..`, links).
+    pub fn load_reference(
+        &self,
+        name: &str,
+        aspects: crate::objective::Aspects,
+    ) -> Result<Objective, String> {
+        let path = resolve_reference(&self.references, name)?;
+        let img = decode_reference(&path).map_err(|e| format!("{name} {e}"))?;
+        Ok(Objective {
+            image: name.to_string(),
+            aspects,
+            region: crate::objective::Region::FULL,
+            analysis: crate::objective::analyze(
+                &img,
+                crate::objective::Region::FULL,
+                self.palette_size,
+            ),
+        })
+    }
+
+    /// Starts a generate on its own thread; the reply (`/vo/generated`) goes to `peer`
+    /// when it is done. Refused while another runs.
+    pub fn generate(self: &Arc<Self>, peer: &Peer) -> Result<(), String> {
+        if self.generating.swap(true, Ordering::SeqCst) {
+            return Err("a generate is already running; wait for /vo/generated".into());
+        }
+        let s = self.session();
+        if s.objectives.is_empty() {
+            self.generating.store(false, Ordering::SeqCst);
+            return Err("there are no objectives: add one with /vo/objective/add first".into());
+        }
+        let objectives: Vec<Objective> = s.objectives.iter().map(|e| e.objective.clone()).collect();
+        let constraints = s.constraints(&self.stage.scene, false);
+        let base = s.base.clone();
+        let (count, clusters) = (s.count as usize, s.clusters as usize);
+        // Seeds travel as OSC int32: a random one stays in 1..=i32::MAX so it can be replayed.
+        let seed = if s.seed == 0 {
+            u64::from(rand::random::<u32>() >> 1).max(1)
+        } else {
+            s.seed
+        };
+        drop(s);
+        let engine = Arc::clone(self);
+        let peer = peer.clone();
+        let spawned = std::thread::Builder::new()
+            .name("generate".into())
+            .spawn(move || {
+                engine.notify(&[msg("/vo/progress", vec![OscType::Float(0.0)])]);
+                let started = Instant::now();
+                let generation = engine.stage.generate(
+                    &GenerateRequest {
+                        objectives: &objectives,
+                        constraints: &constraints,
+                        base: &base,
+                        spread: engine.spread,
+                        count,
+                        clusters,
+                    },
+                    &mut rand::rngs::Xoshiro256PlusPlus::seed_from_u64(seed),
+                );
+                let ms = started.elapsed().as_secs_f32() * 1000.0;
+                if generation.exhausted {
+                    tracing::warn!(
+                        "generate: only {} of {count} candidates after {} draws",
+                        generation.candidates.len(),
+                        generation.draws
+                    );
+                }
+                let reply = msg(
+                    "/vo/generated",
+                    vec![
+                        OscType::Int(generation.candidates.len() as i32),
+                        OscType::Int(generation.entries.len() as i32),
+                        OscType::Float(ms),
+                        OscType::Int(seed as i32),
+                    ],
+                );
+                let mut s = engine.session();
+                s.gallery = Some(Gallery { generation, seed });
+                s.entry = None;
+                let status = engine.status(&s);
+                drop(s);
+                engine.generating.store(false, Ordering::SeqCst);
+                peer.reply(std::slice::from_ref(&reply));
+                engine.notify(&[
+                    msg("/vo/progress", vec![OscType::Float(1.0)]),
+                    reply,
+                    status,
+                ]);
+            });
+        if let Err(e) = spawned {
+            self.generating.store(false, Ordering::SeqCst);
+            return Err(format!("cannot start the generate: {e}"));
+        }
+        Ok(())
+    }
+
+    /// Whether a generate is running.
+    pub fn is_generating(&self) -> bool {
+        self.generating.load(Ordering::SeqCst)
+    }
+
+    /// `/vo/status` for `s`.
+    pub fn status(&self, s: &Session) -> OscMessage {
+        let (candidates, clusters) = s
+            .gallery
+            .as_ref()
+            .map_or((0, 0), |g| (g.generation.candidates.len(), g.len()));
+        msg(
+            "/vo/status",
+            vec![
+                OscType::String(self.stage.scene.name.clone()),
+                OscType::Int(self.stage.scene.lights.len() as i32),
+                OscType::Int(s.objectives.len() as i32),
+                OscType::Int(candidates as i32),
+                OscType::Int(clusters as i32),
+                OscType::Int(s.entry.map_or(0, |(k, _)| k as i32)),
+                OscType::Float(s.fade_s),
+                OscType::Int(i32::from(s.blackout)),
+                OscType::Float(s.master),
+            ],
+        )
+    }
+
+    /// Adds or renews a subscription from `peer`, pushing to its address at `port`.
+    pub fn subscribe(&self, peer: &Peer, port: Option<u16>) -> SocketAddr {
+        let to = SocketAddr::new(peer.addr().ip(), port.unwrap_or(peer.reply_addr().port()));
+        let mut subs = self.subscribers.lock().unwrap_or_else(|p| p.into_inner());
+        subs.retain(|s| s.to != to);
+        subs.push(Subscriber {
+            from: peer.addr().ip(),
+            to,
+            last_seen: Instant::now(),
+        });
+        to
+    }
+
+    /// Ends `peer`'s subscriptions.
+    pub fn unsubscribe(&self, peer: &Peer) {
+        let mut subs = self.subscribers.lock().unwrap_or_else(|p| p.into_inner());
+        subs.retain(|s| s.from != peer.addr().ip());
+    }
+
+    /// Pushes messages to every live subscriber; expired or unreachable ones are dropped.
+    pub fn notify(&self, msgs: &[OscMessage]) {
+        let Some(push) = self.push.get() else {
+            return;
+        };
+        let mut subs = self.subscribers.lock().unwrap_or_else(|p| p.into_inner());
+        subs.retain(|s| {
+            s.last_seen.elapsed() < SUBSCRIPTION
+                && msgs.iter().all(|m| match push.send(s.to, m) {
+                    Ok(()) => true,
+                    Err(e) => {
+                        tracing::info!("dropped the subscription of {}: {e}", s.to);
+                        false
+                    }
+                })
+        });
+    }
+
+    fn renew(&self, peer: &Peer) {
+        let mut subs = self.subscribers.lock().unwrap_or_else(|p| p.into_inner());
+        for s in subs.iter_mut().filter(|s| s.from == peer.addr().ip()) {
+            s.last_seen = Instant::now();
+        }
+    }
+}
+
+/// Handles OSC for an engine behind an `Arc` (generates need to outlive the message).
+pub struct EngineHandler(pub Arc<Engine>);
+
+impl Handler for EngineHandler {
+    fn handle(&self, m: OscMessage, peer: &Peer) -> Vec<OscMessage> {
+        self.0.renew(peer);
+        match cmd::run(&self.0, &m, peer) {
+            Ok(replies) => replies,
+            Err(e) => {
+                tracing::info!("{} from {}: {e}", m.addr, peer.addr());
+                vec![error(&m.addr, &e)]
+            }
+        }
+    }
+}
+
+/// An OSC message.
+pub fn msg(addr: &str, args: Vec<OscType>) -> OscMessage {
+    OscMessage {
+        addr: addr.to_string(),
+        args,
+    }
+}
+
+/// `/vo/error <address> <message>`.
+pub fn error(addr: &str, message: &str) -> OscMessage {
+    msg(
+        "/vo/error",
+        vec![
+            OscType::String(addr.to_string()),
+            OscType::String(message.to_string()),
+        ],
+    )
+}
+
+/// The file `name` inside `references`, refusing anything that leads outside it.
+pub fn resolve_reference(references: &Path, name: &str) -> Result<PathBuf, String> {
+    let relative = crate::scene::safe_relative(name).ok_or_else(|| {
+        format!("image `{name}` must be a file name inside the references folder (no absolute paths, no ..)")
+    })?;
+    let root = references.canonicalize().map_err(|e| {
+        format!(
+            "the references folder {} is not readable: {e}",
+            references.display()
+        )
+    })?;
+    let path = root
+        .join(relative)
+        .canonicalize()
+        .map_err(|_| format!("image `{name}` is not in the references folder"))?;
+    if !path.starts_with(&root) {
+        return Err(format!(
+            "image `{name}` leads outside the references folder"
+        ));
+    }
+    if !path.is_file() {
+        return Err(format!("image `{name}` is not a file"));
+    }
+    Ok(path)
+}
+
+/// The look of entry `k`, member `m` of the gallery, or a sentence saying why not.
+pub fn gallery_look(s: &Session, k: usize, m: usize) -> Result<Look, String> {
+    let g = s
+        .gallery
+        .as_ref()
+        .ok_or("there is no gallery yet: send /vo/generate first")?;
+    if k == 0 || k > g.len() {
+        return Err(format!(
+            "entry {k} is not in the gallery (entries 1-{})",
+            g.len()
+        ));
+    }
+    g.candidate(k, m).cloned().ok_or_else(|| {
+        format!(
+            "entry {k} has no member {m} (members 1-{})",
+            g.generation.entries[k - 1].len()
+        )
+    })
+}

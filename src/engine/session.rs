@@ -1,0 +1,237 @@
+//! The session's state: objectives, constraints, generation settings, the gallery, the base
+//! and live looks with their history, master, blackout and saved looks. Plain data with
+//! the rules of how it changes; no I/O.
+
+use std::collections::BTreeMap;
+
+use crate::gallery::Generation;
+use crate::look::{Look, LookFile};
+use crate::objective::Objective;
+use crate::sampler::Constraints;
+use crate::scene::Scene;
+
+/// Base looks kept for undo (osc.md asks for at least 32).
+pub const HISTORY: usize = 64;
+
+/// An objective with the id OSC addresses use.
+#[derive(Debug, Clone)]
+pub struct Entry {
+    /// 1-based, never reused within a session.
+    pub id: u32,
+    /// The objective.
+    pub objective: Objective,
+}
+
+/// The last generate's result.
+#[derive(Debug, Clone)]
+pub struct Gallery {
+    /// Candidates and entries.
+    pub generation: Generation,
+    /// The seed it was drawn with.
+    pub seed: u64,
+}
+
+impl Gallery {
+    /// Candidate index of entry `k`, member `m` (both 1-based), if they exist.
+    pub fn candidate(&self, k: usize, m: usize) -> Option<&Look> {
+        let members = self.generation.entries.get(k.checked_sub(1)?)?;
+        let index = *members.get(m.checked_sub(1)?)?;
+        self.generation.candidates.get(index)
+    }
+
+    /// Number of entries.
+    pub fn len(&self) -> usize {
+        self.generation.entries.len()
+    }
+
+    /// Whether the generate produced no entry at all.
+    pub fn is_empty(&self) -> bool {
+        self.generation.entries.is_empty()
+    }
+}
+
+/// What a change of the base look came from, so fader moves coalesce into one undo step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Change {
+    /// Pick, next, prev, recall: one undo step each.
+    Step,
+    /// A fader (light or group intensity/colour): consecutive ones are one undo step.
+    Fader,
+}
+
+/// Everything the engine keeps between messages.
+#[derive(Debug, Clone)]
+pub struct Session {
+    /// Objectives in the order they were added.
+    pub objectives: Vec<Entry>,
+    /// The next objective id.
+    pub next_id: u32,
+    /// Per group: designated key.
+    pub key_groups: Vec<bool>,
+    /// Per group: locked.
+    pub locked_groups: Vec<bool>,
+    /// Per light: locked.
+    pub locked_lights: Vec<bool>,
+    /// Candidates per generate.
+    pub count: u32,
+    /// Entries at most.
+    pub clusters: u32,
+    /// 0: a new random seed each generate.
+    pub seed: u64,
+    /// Crossfade time for pick, next, prev, recall, undo, redo.
+    pub fade_s: f32,
+    /// The last gallery.
+    pub gallery: Option<Gallery>,
+    /// What generation starts from.
+    pub base: Look,
+    /// What is on stage (fades run toward it).
+    pub live: Look,
+    /// The gallery entry and member that is live, if the live look is one.
+    pub entry: Option<(usize, usize)>,
+    undo: Vec<Look>,
+    redo: Vec<Look>,
+    last_change: Option<Change>,
+    /// Grand master, 0..1.
+    pub master: f32,
+    /// Blackout on.
+    pub blackout: bool,
+    /// Saved looks by number.
+    pub looks: BTreeMap<u32, LookFile>,
+}
+
+impl Session {
+    /// A fresh session: all off, no objectives, the config's generation settings.
+    pub fn new(scene: &Scene, count: u32, clusters: u32, fade_s: f32) -> Session {
+        let lights = scene.lights.len();
+        Session {
+            objectives: Vec::new(),
+            next_id: 1,
+            key_groups: vec![false; scene.groups.len()],
+            locked_groups: vec![false; scene.groups.len()],
+            locked_lights: vec![false; lights],
+            count,
+            clusters,
+            seed: 0,
+            fade_s,
+            gallery: None,
+            base: Look::off(lights),
+            live: Look::off(lights),
+            entry: None,
+            undo: Vec::new(),
+            redo: Vec::new(),
+            last_change: None,
+            master: 1.0,
+            blackout: false,
+            looks: BTreeMap::new(),
+        }
+    }
+
+    /// The sampler's constraints: locked lights include the lights of locked groups.
+    pub fn constraints(&self, scene: &Scene, per_light: bool) -> Constraints {
+        let mut locked = self.locked_lights.clone();
+        for (g, group) in scene.groups.iter().enumerate() {
+            if self.locked_groups[g] {
+                for &l in &group.lights {
+                    locked[l] = true;
+                }
+            }
+        }
+        Constraints {
+            locked,
+            keys: self.key_groups.clone(),
+            per_light,
+        }
+    }
+
+    /// Makes `look` both base and live, remembering the old base for undo.
+    pub fn set_base(&mut self, look: Look, change: Change) {
+        let coalesce = change == Change::Fader && self.last_change == Some(Change::Fader);
+        if !coalesce {
+            self.undo.push(self.base.clone());
+            if self.undo.len() > HISTORY {
+                self.undo.remove(0);
+            }
+        }
+        self.redo.clear();
+        self.last_change = Some(change);
+        self.base = look.clone();
+        self.live = look;
+    }
+
+    /// Steps back one base look; returns the remaining undo depth, or None if there is none.
+    pub fn undo(&mut self) -> Option<usize> {
+        let previous = self.undo.pop()?;
+        self.redo.push(std::mem::replace(&mut self.base, previous));
+        self.after_history_step();
+        Some(self.undo.len())
+    }
+
+    /// Steps forward again; returns the remaining redo depth, or None if there is none.
+    pub fn redo(&mut self) -> Option<usize> {
+        let next = self.redo.pop()?;
+        self.undo.push(std::mem::replace(&mut self.base, next));
+        self.after_history_step();
+        Some(self.redo.len())
+    }
+
+    fn after_history_step(&mut self) {
+        self.live = self.base.clone();
+        self.entry = None;
+        self.last_change = Some(Change::Step);
+    }
+
+    /// The objective with `id`, as an index.
+    pub fn objective_index(&self, id: u32) -> Option<usize> {
+        self.objectives.iter().position(|e| e.id == id)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scene() -> Scene {
+        let toml = "[[light]]\nchannel = 1\nbasis = \"a.exr\"\nprofile = \"dimmer\"\nuniverse = 1\naddress = 1\n";
+        Scene::parse(std::path::Path::new("."), toml).unwrap()
+    }
+
+    fn look(v: f32) -> Look {
+        let mut l = Look::off(1);
+        l.levels[0].intensity = v;
+        l
+    }
+
+    #[test]
+    fn undo_redo_walk_the_base_history() {
+        let mut s = Session::new(&scene(), 100, 12, 2.0);
+        s.set_base(look(0.1), Change::Step);
+        s.set_base(look(0.2), Change::Step);
+        assert_eq!(s.undo(), Some(1));
+        assert_eq!(s.base, look(0.1));
+        assert_eq!(s.live, look(0.1));
+        assert_eq!(s.redo(), Some(0));
+        assert_eq!(s.base, look(0.2));
+        assert_eq!(s.redo(), None);
+        assert_eq!(s.undo(), Some(1));
+        assert_eq!(s.undo(), Some(0));
+        assert_eq!(s.base, look(0.0));
+        assert_eq!(s.undo(), None);
+    }
+
+    #[test]
+    fn fader_moves_coalesce_and_history_is_bounded() {
+        let mut s = Session::new(&scene(), 100, 12, 2.0);
+        for i in 0..10 {
+            s.set_base(look(i as f32 / 10.0), Change::Fader);
+        }
+        assert_eq!(s.undo(), Some(0), "one step for a fader move");
+        for i in 0..200 {
+            s.set_base(look(i as f32 / 200.0), Change::Step);
+        }
+        let mut depth = 0;
+        while s.undo().is_some() {
+            depth += 1;
+        }
+        assert_eq!(depth, HISTORY);
+    }
+}
