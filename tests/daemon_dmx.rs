@@ -47,6 +47,18 @@ fn pick_puts_exactly_the_candidate_on_the_wire() {
                 );
             }
         }
+        // The comparison can tell: a dimmer 10 steps away from the look is a mismatch.
+        let mut off = want.clone();
+        let dimmer = off
+            .iter_mut()
+            .find(|l| common::daemon::fixture(l.ch).profile == "dimmer")
+            .expect("a dimmer");
+        let step = 10.0 / 255.0;
+        dimmer.intensity += if dimmer.intensity < 0.5 { step } else { -step };
+        assert!(
+            look_mismatch(&off, &sacn).is_some(),
+            "a changed look still matches"
+        );
         // rgbw: the white slot takes the common part, so one of r, g, b is (nearly) 0.
         let rgbw = STAGE.iter().find(|f| f.profile == "rgbw").expect("an rgbw");
         let s = rgbw.slots(&sacn[&rgbw.universe]);
