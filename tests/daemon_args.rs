@@ -159,6 +159,14 @@ fn over_tcp(framing: Framing) {
     assert!((num(&r.args[1]) - 0.4).abs() < 1e-6);
     c.err("/vo/light/99/level", vec![int(40)]);
     c.silent("/vo/next", vec![int(0)]);
+    // A frame that is not OSC gets nothing.
+    let garbage = match framing {
+        Framing::LengthPrefix => [&[0, 0, 0, 8][..], b"not osc!"].concat(),
+        Framing::Slip => [&[0xC0][..], b"not osc!", &[0xC0]].concat(),
+    };
+    c.send_raw(&garbage);
+    let got = c.fence();
+    assert!(got.is_empty(), "a non-OSC frame was answered: {got:?}");
     c.send_packet(&OscPacket::Bundle(OscBundle {
         timetag: OscTime::from((0, 1)),
         content: vec![

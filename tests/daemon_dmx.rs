@@ -198,6 +198,9 @@ fn generate_neither_stops_the_frames_nor_the_answers() {
     };
     let to = Instant::now().max(from + Duration::from_millis(500));
     let took = to - from;
+    println!(
+        "a generate of 1000: {generated:?} after {took:?}; {pongs_before} pings answered meanwhile"
+    );
     assert_eq!(generated.args.len(), 4, "{generated:?}");
     assert_eq!(num(&generated.args[0]) as i32, 1000);
     assert!(num(&generated.args[1]) >= 1.0);

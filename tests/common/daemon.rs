@@ -341,6 +341,8 @@ pub trait Osc {
             self.log()
         );
         assert!(got.is_empty(), "{what}: more than one reply: {got:?}");
+        let extra = self.fence();
+        assert!(extra.is_empty(), "{what}: more after {reply}: {extra:?}");
         last
     }
 
