@@ -289,21 +289,27 @@ impl Engine {
         subs.retain(|s| s.from != peer.addr().ip());
     }
 
+    /// Sends messages to `to` from the OSC port (pushes, not replies).
+    pub fn push_to(&self, to: SocketAddr, msgs: &[OscMessage]) -> Result<(), String> {
+        let push = self
+            .push
+            .get()
+            .ok_or("subscriptions need OSC over UDP (osc.udp is off)")?;
+        msgs.iter().try_for_each(|m| push.send(to, m))
+    }
+
     /// Pushes messages to every live subscriber; expired or unreachable ones are dropped.
     pub fn notify(&self, msgs: &[OscMessage]) {
-        let Some(push) = self.push.get() else {
-            return;
-        };
         let mut subs = self.subscribers.lock().unwrap_or_else(|p| p.into_inner());
         subs.retain(|s| {
             s.last_seen.elapsed() < SUBSCRIPTION
-                && msgs.iter().all(|m| match push.send(s.to, m) {
+                && match self.push_to(s.to, msgs) {
                     Ok(()) => true,
                     Err(e) => {
                         tracing::info!("dropped the subscription of {}: {e}", s.to);
                         false
                     }
-                })
+                }
         });
     }
 
