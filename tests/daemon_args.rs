@@ -257,3 +257,60 @@ fn visobjd_send_prints_the_pong() {
         "stdout: {stdout:?}"
     );
 }
+
+const PYTHON_DAEMON_CLIENT: &str = r#"
+import sys
+from pythonosc.udp_client import SimpleUDPClient
+from pythonosc.tcp_client import SimpleTCPClient
+port = int(sys.argv[1])
+c = SimpleUDPClient("127.0.0.1", port)
+for address, args in [("/vo/ping", [7]), ("/vo/status", []), ("/vo/light/99/level", [50])]:
+    c.send_message(address, args)
+    for m in c.get_messages(5):
+        print("udp", m.address, m.params)
+        break
+for mode in ("1.0", "1.1"):
+    t = SimpleTCPClient("127.0.0.1", port, mode=mode, timeout=5)
+    t.send_message("/vo/generate/count", [30])
+    for m in t.get_messages(5):
+        print("tcp", m.address, m.params)
+        break
+    t.close()
+"#;
+
+/// An independent OSC implementation (python-osc) gets the documented replies from the
+/// real daemon over UDP and both TCP framings.
+#[test]
+fn python_osc_gets_the_documented_replies() {
+    let probe = Command::new("python3")
+        .args(["-c", "import pythonosc"])
+        .output();
+    if !probe.is_ok_and(|o| o.status.success()) {
+        println!("note: python3 with python-osc is not installed; cross-check skipped");
+        return;
+    }
+    let d = Daemon::start("python-osc");
+    let out = Command::new("python3")
+        .args(["-c", PYTHON_DAEMON_CLIENT])
+        .arg(d.port.to_string())
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(lines[0], "udp /vo/pong [7]", "{text}");
+    assert!(
+        lines[1].starts_with("udp /vo/status ['test scene', 6, 0, 0, 0, 0,"),
+        "{text}"
+    );
+    assert_eq!(
+        lines[2],
+        "udp /vo/error ['/vo/light/99/level', 'light 99 is not in the scene (channels 1-6)']",
+        "{text}"
+    );
+    assert_eq!(&lines[3..], ["tcp /vo/generate/count [30]"; 2], "{text}");
+}
