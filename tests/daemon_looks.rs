@@ -109,3 +109,42 @@ fn looks_objectives_and_the_live_look_survive_kill_9() {
     d.ok("/vo/look/recall", vec![int(5)], "/vo/look/recalled");
     assert!(d.live()[3].intensity == 0.0, "look 5 predates light 4");
 }
+
+/// Corrupt state files are kept aside (never deleted) and the daemon starts without them;
+/// a save writes a fresh file that a restart reads back.
+#[test]
+fn corrupt_state_files_are_kept_aside_and_the_daemon_starts() {
+    let mut d = Daemon::start("looks-corrupt");
+    d.ok(
+        "/vo/look/save",
+        vec![int(1), string("first")],
+        "/vo/look/saved",
+    );
+    d.kill();
+    let state = d.state_dir();
+    for name in ["live.json", "looks.json", "session.json"] {
+        std::fs::write(state.join(name), b"{ this is not json").unwrap();
+    }
+    d.restart();
+    assert!(d.looks().is_empty(), "the corrupt looks file was not used");
+    let kept: Vec<String> = std::fs::read_dir(&state)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.contains(".corrupt-"))
+        .collect();
+    assert_eq!(kept.len(), 3, "{kept:?}");
+    for name in &kept {
+        assert_eq!(
+            std::fs::read(state.join(name)).unwrap(),
+            b"{ this is not json"
+        );
+    }
+    d.ok(
+        "/vo/look/save",
+        vec![int(2), string("again")],
+        "/vo/look/saved",
+    );
+    d.kill();
+    d.restart();
+    assert_eq!(d.looks(), vec![(2, "again".to_string())]);
+}
