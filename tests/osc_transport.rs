@@ -10,7 +10,7 @@ use std::time::{Duration, Instant};
 
 use rosc::{OscBundle, OscMessage, OscPacket, OscTime, OscType};
 use visobjd::config::OscConfig;
-use visobjd::osc::framing::{self, Decoder, Framing};
+use visobjd::osc::framing::{self, Decoder, Frame, Framing};
 use visobjd::osc::{Handler, Limits, Peer, Server, Transport};
 
 const PATIENCE: Duration = Duration::from_secs(5);
@@ -190,19 +190,22 @@ fn udp_message_and_bundles_in_order() {
 }
 
 #[test]
-fn too_deep_bundles_and_garbage_get_no_reply() {
+fn too_deep_bundles_get_an_error_and_garbage_nothing() {
     let h = serve();
     let c = udp_client();
     let nest = |levels: usize, i: i32| (0..levels).fold(echo(i), |p, _| bundle(vec![p]));
     c.send_to(&encode(&nest(8, 8)), h.udp()).unwrap();
     assert_eq!(ints(&recv(&c)), [8]);
-    c.send_to(&encode(&nest(9, 9)), h.udp()).unwrap();
+    c.send_to(&encode(&nest(100, 9)), h.udp()).unwrap();
+    let e = recv(&c);
+    assert_eq!(e.addr, "/vo/error", "{e:?}");
+    assert_eq!(e.args[0], OscType::String("/echo".into()));
     c.send_to(b"GET / HTTP/1.1\r\n\r\n", h.udp()).unwrap();
     c.send_to(&encode(&echo(10)), h.udp()).unwrap();
     // Datagrams are handled in order: the probe's reply comes first if nothing else did.
     assert_eq!(ints(&recv(&c)), [10]);
     nothing_arrives(&c);
-    assert_eq!(h.server.not_osc(), 2);
+    assert_eq!(h.server.not_osc(), 1);
     assert_eq!(h.handler.seen(), ["/echo", "/echo"]);
 }
 
@@ -340,7 +343,7 @@ fn udp_on_ipv6_loopback() {
 struct Tcp {
     stream: TcpStream,
     decoder: Decoder,
-    frames: Vec<Vec<u8>>,
+    frames: Vec<Frame>,
 }
 
 impl Tcp {
@@ -360,9 +363,12 @@ impl Tcp {
         while self.frames.is_empty() {
             let n = self.stream.read(&mut buf).expect("a reply");
             assert!(n > 0, "closed while waiting for a reply");
-            self.decoder.feed(&buf[..n], &mut self.frames).unwrap();
+            self.decoder.feed(&buf[..n], &mut self.frames);
         }
-        match rosc::decoder::decode_udp(&self.frames.remove(0)).unwrap().1 {
+        let Frame::Packet(frame) = self.frames.remove(0) else {
+            panic!("replies are never over the frame limit");
+        };
+        match rosc::decoder::decode_udp(&frame).unwrap().1 {
             OscPacket::Message(m) => m,
             OscPacket::Bundle(b) => panic!("replies are messages, got {b:?}"),
         }
@@ -440,20 +446,38 @@ fn tcp_with_slip() {
 }
 
 #[test]
-fn oversize_frames_close_the_connection() {
+fn oversize_frames_are_answered_and_skipped() {
     let limits = Limits {
         max_frame: 1024,
         ..Limits::default()
     };
     let h = serve_with(loopback(), limits);
-    let mut t = Tcp::connect(h.tcp());
-    t.stream.write_all(&2048u32.to_be_bytes()).unwrap();
-    assert!(t.closed());
+    for framing in [Framing::LengthPrefix, Framing::Slip] {
+        let mut t = Tcp::connect(h.tcp());
+        let big = OscPacket::Message(msg("/big", vec![OscType::String("x".repeat(5000))]));
+        t.stream
+            .write_all(&framing::encode(framing, &encode(&big)))
+            .unwrap();
+        let e = t.next();
+        assert_eq!(e.addr, "/vo/error", "{e:?}");
+        assert_eq!(e.args[0], OscType::String("/big".into()));
+        // The connection goes on after it.
+        t.stream
+            .write_all(&framing::encode(framing, &encode(&echo(7))))
+            .unwrap();
+        assert_eq!(ints(&t.next()), [7]);
+    }
+    assert!(!h.handler.seen().contains(&"/big".to_string()));
+    // An oversize frame that is not OSC gets nothing.
     let mut t = Tcp::connect(h.tcp());
     let mut endless = vec![0xC0];
     endless.extend([b'x'; 2000]);
-    let _ = t.stream.write_all(&endless);
-    assert!(t.closed());
+    endless.push(0xC0);
+    t.stream.write_all(&endless).unwrap();
+    t.stream
+        .write_all(&framing::encode(Framing::Slip, &encode(&echo(8))))
+        .unwrap();
+    assert_eq!(ints(&t.next()), [8]);
 }
 
 #[test]
@@ -497,7 +521,7 @@ impl Tcp {
             match self.stream.read(&mut buf) {
                 Ok(0) | Err(_) => return true,
                 Ok(n) => {
-                    self.decoder.feed(&buf[..n], &mut self.frames).unwrap();
+                    self.decoder.feed(&buf[..n], &mut self.frames);
                     if !self.frames.is_empty() {
                         return false;
                     }

@@ -3,9 +3,8 @@
 //! Ours rather than rosc's: rosc 0.11 has no SLIP, and its TCP decoder mis-measures frames
 //! (notes/crates.md). The first byte of a stream picks the framing: 0xC0 (SLIP END) means
 //! SLIP, anything else is a big-endian length prefix (whose first byte is 0 for any frame we
-//! accept). Memory per connection is bounded by the frame limit.
-
-use std::fmt;
+//! accept). Memory per connection is bounded by the frame limit: a larger frame is
+//! reported by its first bytes and skipped, so its sender can be told why.
 
 /// The largest packet a stream may carry. Larger frames close the connection; the decode
 /// buffer never grows past this.
@@ -25,33 +24,27 @@ pub enum Framing {
     LengthPrefix,
 }
 
-/// A stream that cannot be decoded any further; the connection should be closed.
+/// How many leading bytes of a frame over the limit are kept, so its address can be named
+/// in the error (an OSC address is rarely longer).
+pub const HEAD: usize = 256;
+
+/// One frame taken off a stream.
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub enum FrameError {
-    /// A frame is larger than the limit (`len` is the declared size, or the limit + 1 for a
-    /// SLIP frame that ran past it).
+pub enum Frame {
+    /// A whole packet.
+    Packet(Vec<u8>),
+    /// A frame over the size limit: reported once its first bytes are in, then skipped
+    /// without being buffered (the stream goes on after it).
     Oversize {
-        /// Bytes the frame has (at least).
+        /// Bytes the frame has: the declared length, or (SLIP) at least the limit + 1.
         len: usize,
-        /// The limit it broke.
-        limit: usize,
+        /// Its first [`HEAD`] bytes (fewer if the limit is smaller), for naming it.
+        head: Vec<u8>,
     },
 }
 
-impl fmt::Display for FrameError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            FrameError::Oversize { len, limit } => {
-                write!(f, "a frame of {len} bytes is over the {limit}-byte limit")
-            }
-        }
-    }
-}
-
-impl std::error::Error for FrameError {}
-
 /// Incremental per-connection decoder: feed it whatever each read returned, collect whole
-/// packets. Holds at most one partial frame (bounded by `max`).
+/// packets. Holds at most one partial frame (bounded by `max`); larger frames are skipped.
 #[derive(Debug)]
 pub struct Decoder {
     framing: Option<Framing>,
@@ -63,6 +56,8 @@ pub struct Decoder {
     header: [u8; 4],
     header_len: usize,
     want: Option<usize>,
+    /// Inside a frame over the limit: bytes still to skip (SLIP: until the next END).
+    skip: Option<usize>,
 }
 
 impl Default for Decoder {
@@ -82,6 +77,7 @@ impl Decoder {
             header: [0; 4],
             header_len: 0,
             want: None,
+            skip: None,
         }
     }
 
@@ -90,12 +86,13 @@ impl Decoder {
         self.framing
     }
 
-    /// Consumes `data` and appends every packet it completes to `out`, in order. Empty
-    /// frames are skipped. After an error the stream is unusable.
-    pub fn feed(&mut self, data: &[u8], out: &mut Vec<Vec<u8>>) -> Result<(), FrameError> {
+    /// Consumes `data` and appends every frame it completes to `out`, in order. Empty
+    /// frames are skipped; a frame over the limit is reported once as [`Frame::Oversize`]
+    /// and its remaining bytes are dropped as they arrive.
+    pub fn feed(&mut self, data: &[u8], out: &mut Vec<Frame>) {
         let framing = match (self.framing, data.first()) {
             (Some(f), _) => f,
-            (None, None) => return Ok(()),
+            (None, None) => return,
             (None, Some(&first)) => {
                 let f = if first == END {
                     Framing::Slip
@@ -112,8 +109,20 @@ impl Decoder {
         }
     }
 
-    fn feed_slip(&mut self, data: &[u8], out: &mut Vec<Vec<u8>>) -> Result<(), FrameError> {
+    fn head_len(&self) -> usize {
+        HEAD.min(self.max)
+    }
+
+    fn feed_slip(&mut self, data: &[u8], out: &mut Vec<Frame>) {
         for &b in data {
+            if self.skip.is_some() {
+                // Skipping an oversize frame: only its END matters.
+                if b == END {
+                    self.skip = None;
+                    self.escaped = false;
+                }
+                continue;
+            }
             let byte = if self.escaped {
                 self.escaped = false;
                 match b {
@@ -126,7 +135,7 @@ impl Decoder {
                 match b {
                     END => {
                         if !self.buf.is_empty() {
-                            out.push(std::mem::take(&mut self.buf));
+                            out.push(Frame::Packet(std::mem::take(&mut self.buf)));
                         }
                         continue;
                     }
@@ -138,18 +147,27 @@ impl Decoder {
                 }
             };
             if self.buf.len() >= self.max {
-                return Err(FrameError::Oversize {
+                let mut head = std::mem::take(&mut self.buf);
+                head.truncate(self.head_len());
+                out.push(Frame::Oversize {
                     len: self.max + 1,
-                    limit: self.max,
+                    head,
                 });
+                self.skip = Some(usize::MAX);
+                continue;
             }
             self.buf.push(byte);
         }
-        Ok(())
     }
 
-    fn feed_prefixed(&mut self, mut data: &[u8], out: &mut Vec<Vec<u8>>) -> Result<(), FrameError> {
+    fn feed_prefixed(&mut self, mut data: &[u8], out: &mut Vec<Frame>) {
         while !data.is_empty() {
+            if let Some(left) = self.skip {
+                let n = left.min(data.len());
+                data = &data[n..];
+                self.skip = (left > n).then_some(left - n);
+                continue;
+            }
             let Some(want) = self.want else {
                 let n = (4 - self.header_len).min(data.len());
                 self.header[self.header_len..self.header_len + n].copy_from_slice(&data[..n]);
@@ -158,28 +176,37 @@ impl Decoder {
                 if self.header_len == 4 {
                     self.header_len = 0;
                     let len = u32::from_be_bytes(self.header) as usize;
-                    if len > self.max {
-                        return Err(FrameError::Oversize {
-                            len,
-                            limit: self.max,
-                        });
-                    }
                     if len > 0 {
                         self.want = Some(len);
-                        self.buf.reserve_exact(len);
+                        self.buf.reserve_exact(len.min(self.max));
                     }
                 }
                 continue;
             };
+            if want > self.max {
+                // Keep only the head, report it, then skip the rest.
+                let head_len = self.head_len();
+                let n = (head_len - self.buf.len()).min(data.len());
+                self.buf.extend_from_slice(&data[..n]);
+                data = &data[n..];
+                if self.buf.len() == head_len {
+                    self.want = None;
+                    out.push(Frame::Oversize {
+                        len: want,
+                        head: std::mem::take(&mut self.buf),
+                    });
+                    self.skip = (want > head_len).then_some(want - head_len);
+                }
+                continue;
+            }
             let n = (want - self.buf.len()).min(data.len());
             self.buf.extend_from_slice(&data[..n]);
             data = &data[n..];
             if self.buf.len() == want {
                 self.want = None;
-                out.push(std::mem::take(&mut self.buf));
+                out.push(Frame::Packet(std::mem::take(&mut self.buf)));
             }
         }
-        Ok(())
     }
 }
 
@@ -219,13 +246,18 @@ pub fn encode(framing: Framing, packet: &[u8]) -> Vec<u8> {
 mod tests {
     use super::*;
 
-    fn decode_in_chunks(stream: &[u8], chunk: usize) -> Result<Vec<Vec<u8>>, FrameError> {
+    fn decode_in_chunks(stream: &[u8], chunk: usize) -> Vec<Vec<u8>> {
         let mut d = Decoder::default();
         let mut out = Vec::new();
         for c in stream.chunks(chunk) {
-            d.feed(c, &mut out)?;
+            d.feed(c, &mut out);
         }
-        Ok(out)
+        out.into_iter()
+            .map(|f| match f {
+                Frame::Packet(p) => p,
+                other => panic!("{other:?}"),
+            })
+            .collect()
     }
 
     fn packets() -> Vec<Vec<u8>> {
@@ -241,7 +273,7 @@ mod tests {
         for framing in [Framing::Slip, Framing::LengthPrefix] {
             let stream: Vec<u8> = packets().iter().flat_map(|p| encode(framing, p)).collect();
             for chunk in [1, 2, 3, 4, 5, 7, 13, 64, 1000, stream.len()] {
-                let got = decode_in_chunks(&stream, chunk).unwrap();
+                let got = decode_in_chunks(&stream, chunk);
                 assert_eq!(got, packets(), "{framing:?} in chunks of {chunk}");
             }
         }
@@ -251,12 +283,12 @@ mod tests {
     fn the_first_byte_picks_the_framing() {
         let mut d = Decoder::default();
         let mut out = Vec::new();
-        d.feed(&[], &mut out).unwrap();
+        d.feed(&[], &mut out);
         assert_eq!(d.framing(), None);
-        d.feed(&[END], &mut out).unwrap();
+        d.feed(&[END], &mut out);
         assert_eq!(d.framing(), Some(Framing::Slip));
         let mut d = Decoder::default();
-        d.feed(&[0], &mut out).unwrap();
+        d.feed(&[0], &mut out);
         assert_eq!(d.framing(), Some(Framing::LengthPrefix));
         assert!(out.is_empty());
     }
@@ -266,7 +298,7 @@ mod tests {
         let stream = [
             END, END, b'a', ESC, ESC_END, ESC, ESC_ESC, END, END, END, b'b', END,
         ];
-        let got = decode_in_chunks(&stream, stream.len()).unwrap();
+        let got = decode_in_chunks(&stream, stream.len());
         assert_eq!(got, vec![vec![b'a', END, ESC], vec![b'b']]);
         assert_eq!(
             encode(Framing::Slip, &[END, ESC, 7]),
@@ -279,31 +311,54 @@ mod tests {
         let mut stream = vec![0, 0, 0, 0];
         stream.extend(encode(Framing::LengthPrefix, b"xy"));
         stream.extend([0, 0, 0, 0]);
-        assert_eq!(decode_in_chunks(&stream, 3).unwrap(), vec![b"xy".to_vec()]);
+        assert_eq!(decode_in_chunks(&stream, 3), vec![b"xy".to_vec()]);
     }
 
     #[test]
-    fn oversize_frames_are_errors_without_buffering_them() {
+    fn oversize_frames_are_reported_by_their_head_and_skipped() {
         let limit = 16;
+        for framing in [Framing::LengthPrefix, Framing::Slip] {
+            let big: Vec<u8> = (0..200u8).map(|b| b % 0xC0).collect();
+            let mut stream = encode(framing, &[1; 16]);
+            stream.extend(encode(framing, &big));
+            stream.extend(encode(framing, b"after"));
+            for chunk in [1, 5, 64, stream.len()] {
+                let mut d = Decoder::new(limit);
+                let mut out = Vec::new();
+                for c in stream.chunks(chunk) {
+                    d.feed(c, &mut out);
+                    assert!(d.buf.len() <= limit, "never buffers past the limit");
+                }
+                let len = match framing {
+                    Framing::LengthPrefix => 200,
+                    Framing::Slip => limit + 1,
+                };
+                assert_eq!(
+                    out,
+                    [
+                        Frame::Packet(vec![1; 16]),
+                        Frame::Oversize {
+                            len,
+                            head: big[..limit].to_vec()
+                        },
+                        Frame::Packet(b"after".to_vec()),
+                    ],
+                    "{framing:?} in chunks of {chunk}"
+                );
+            }
+        }
+        // A declared length far over the limit is reported once its head is in, long
+        // before the frame could end.
         let mut d = Decoder::new(limit);
         let mut out = Vec::new();
-        let err = d.feed(&[0, 0, 0, 17], &mut out).unwrap_err();
-        assert_eq!(err, FrameError::Oversize { len: 17, limit });
-        assert!(err.to_string().contains("17 bytes"), "{err}");
-        // A frame of exactly the limit passes.
-        let mut d = Decoder::new(limit);
-        d.feed(&encode(Framing::LengthPrefix, &[1; 16]), &mut out)
-            .unwrap();
-        assert_eq!(out, vec![vec![1; 16]]);
-
-        let mut d = Decoder::new(limit);
-        let mut out = Vec::new();
-        d.feed(&encode(Framing::Slip, &[2; 16]), &mut out).unwrap();
-        assert_eq!(out, vec![vec![2; 16]]);
-        let mut endless = vec![END];
-        endless.extend([3; 100]);
-        let err = d.feed(&endless[1..], &mut out).unwrap_err();
-        assert!(matches!(err, FrameError::Oversize { limit: 16, .. }));
-        assert!(d.buf.len() <= limit);
+        d.feed(&u32::MAX.to_be_bytes(), &mut out);
+        d.feed(&[7; 40], &mut out);
+        assert_eq!(
+            out,
+            [Frame::Oversize {
+                len: u32::MAX as usize,
+                head: vec![7; 16]
+            }]
+        );
     }
 }

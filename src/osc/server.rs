@@ -20,8 +20,8 @@ use tokio::task::{JoinHandle, JoinSet};
 use tracing::{debug, error, info, trace, warn};
 
 use super::args::Request;
-use super::framing::{self, Decoder, Framing};
-use super::packet;
+use super::framing::{self, Decoder, Frame, Framing};
+use super::packet::{self, Item, PacketError};
 use crate::config::{Cidr, OscConfig};
 
 /// What the engine implements to answer OSC.
@@ -53,7 +53,8 @@ pub struct Limits {
     pub max_connections: usize,
     /// A TCP connection that completes no frame for this long is closed.
     pub idle_timeout: Duration,
-    /// The largest frame a TCP stream may carry; larger ones close the connection.
+    /// The largest frame a TCP stream may carry; larger ones are skipped unbuffered and
+    /// answered with `/vo/error`.
     pub max_frame: usize,
     /// Replies a connection may have queued ([`Peer::reply`]) before it is dropped as too
     /// slow.
@@ -151,7 +152,7 @@ impl Sender {
     /// Sends one message now, without waiting; an error says why it did not go (including
     /// a full socket buffer).
     pub fn send(&self, to: SocketAddr, msg: &OscMessage) -> Result<(), String> {
-        let bytes = encode(msg)?;
+        let bytes = encode_datagram(msg)?;
         self.socket
             .try_send_to(&bytes, to)
             .map(drop)
@@ -354,9 +355,22 @@ impl Shared {
 
     /// Runs one packet's messages through the handler, returning the replies in order.
     fn dispatch(&self, bytes: &[u8], peer: &Peer) -> Vec<OscMessage> {
-        let msgs = match packet::decode(bytes) {
-            Ok(msgs) => msgs,
+        let items = match packet::decode_items(bytes) {
+            Ok(items) => items,
             Err(e) => {
+                // A packet that nests too deep but names its address is OSC: say why.
+                if e == PacketError::TooDeep
+                    && let Some(addr) = packet::first_address(bytes)
+                {
+                    debug!("OSC: {addr} from {} is nested too deep", peer.addr);
+                    return vec![transport_error(
+                        addr,
+                        format!(
+                            "the packet nests bundles or arrays deeper than {}; nothing in it ran",
+                            packet::MAX_DEPTH
+                        ),
+                    )];
+                }
                 self.not_osc.fetch_add(1, Ordering::Relaxed);
                 if let Some(n) = throttled(&self.not_osc_log) {
                     warn!(
@@ -369,7 +383,18 @@ impl Shared {
             }
         };
         let mut replies = Vec::new();
-        for msg in msgs {
+        for item in items {
+            let msg = match item {
+                Item::Message(msg) => msg,
+                Item::Malformed { addr, why } => {
+                    debug!("OSC: malformed {addr} from {}: {why}", peer.addr);
+                    replies.push(transport_error(
+                        addr,
+                        format!("the message is cut short or corrupt ({why}); nothing changed"),
+                    ));
+                    continue;
+                }
+            };
             if msg.args.len() <= 1 && Request::new(&msg).is_button_release() {
                 trace!("OSC: button release {} from {}", msg.addr, peer.addr);
                 continue;
@@ -379,17 +404,44 @@ impl Shared {
                 Ok(r) => replies.extend(r),
                 Err(_) => {
                     error!("OSC: the handler panicked on {addr} from {}", peer.addr);
-                    replies.push(OscMessage {
-                        addr: "/vo/error".into(),
-                        args: vec![
-                            OscType::String(addr),
-                            OscType::String("internal error; see the daemon's log".into()),
-                        ],
-                    });
+                    replies.push(transport_error(
+                        addr,
+                        "internal error; see the daemon's log".into(),
+                    ));
                 }
             }
         }
         replies
+    }
+
+    /// The answer to a stream frame over the size limit: a `/vo/error` naming its address
+    /// when its head has one (a frame with no readable address is garbage: nothing).
+    fn oversize(&self, len: usize, head: &[u8], from: SocketAddr) -> Option<OscMessage> {
+        let limit = self.limits.max_frame;
+        let Some(addr) = packet::first_address(head) else {
+            self.not_osc.fetch_add(1, Ordering::Relaxed);
+            if let Some(n) = throttled(&self.not_osc_log) {
+                warn!(
+                    "OSC over TCP: skipped a frame of {len} bytes from {from} that is not OSC ({n} ignored since the last report)"
+                );
+            }
+            return None;
+        };
+        debug!("OSC over TCP: skipped {addr}, a frame of {len} bytes from {from}");
+        Some(transport_error(
+            addr,
+            format!(
+                "the packet is {len} bytes, over the {limit}-byte limit; it was dropped and nothing changed"
+            ),
+        ))
+    }
+}
+
+/// `/vo/error <address> <message>` from the transport itself.
+fn transport_error(addr: String, message: String) -> OscMessage {
+    OscMessage {
+        addr: "/vo/error".into(),
+        args: vec![OscType::String(addr), OscType::String(message)],
     }
 }
 
@@ -416,7 +468,13 @@ async fn udp_loop(sender: Sender, shared: Arc<Shared>) {
             route: Route::Udp(sender.clone()),
         };
         for reply in shared.dispatch(&buf[..n], &peer) {
-            let Ok(bytes) = encode(&reply) else { continue };
+            let bytes = match encode_datagram(&reply) {
+                Ok(bytes) => bytes,
+                Err(e) => {
+                    debug!("OSC: reply to {} not sent: {e}", peer.reply_addr);
+                    continue;
+                }
+            };
             if let Err(e) = socket.send_to(&bytes, peer.reply_addr).await {
                 debug!("OSC: reply to {} failed: {e}", peer.reply_addr);
             }
@@ -458,8 +516,7 @@ async fn tcp_loop(listener: TcpListener, shared: Arc<Shared>) {
     }
 }
 
-/// Serves one TCP connection until it closes, idles out, breaks the framing, or lets its
-/// reply queue overflow.
+/// Serves one TCP connection until it closes, idles out, or lets its reply queue overflow.
 async fn connection(stream: TcpStream, from: SocketAddr, shared: Arc<Shared>) {
     debug!("OSC over TCP: {from} connected");
     // Small replies should not wait for Nagle; failing to set it only costs latency.
@@ -496,10 +553,7 @@ async fn connection(stream: TcpStream, from: SocketAddr, shared: Arc<Shared>) {
                     }
                     Ok(Ok(n)) => n,
                 };
-                if let Err(e) = decoder.feed(&buf[..n], &mut frames) {
-                    warn!("OSC over TCP: closing {from}: {e}");
-                    return;
-                }
+                decoder.feed(&buf[..n], &mut frames);
                 let Some(framing) = decoder.framing() else { continue };
                 if frames.is_empty() {
                     continue;
@@ -512,7 +566,13 @@ async fn connection(stream: TcpStream, from: SocketAddr, shared: Arc<Shared>) {
                 };
                 let mut out = Vec::new();
                 for frame in frames.drain(..) {
-                    for reply in shared.dispatch(&frame, &peer) {
+                    let replies = match frame {
+                        Frame::Packet(p) => shared.dispatch(&p, &peer),
+                        Frame::Oversize { len, head } => {
+                            shared.oversize(len, &head, from).into_iter().collect()
+                        }
+                    };
+                    for reply in replies {
                         if let Ok(bytes) = encode(&reply) {
                             out.extend(framing::encode(framing, &bytes));
                         }
@@ -547,6 +607,42 @@ async fn write(
 fn encode(msg: &OscMessage) -> Result<Vec<u8>, String> {
     rosc::encoder::encode(&OscPacket::Message(msg.clone()))
         .map_err(|e| format!("cannot encode {}: {e}", msg.addr))
+}
+
+/// The largest UDP payload (IPv4; IPv6 allows a few bytes more).
+const MAX_DATAGRAM: usize = 65_507;
+
+/// Encodes a message for one datagram, halving its longest strings (marked with "…") until
+/// it fits: an error that echoes a near-64 KiB address or name must still arrive, or the
+/// message would go unanswered.
+fn encode_datagram(msg: &OscMessage) -> Result<Vec<u8>, String> {
+    let mut bytes = encode(msg)?;
+    let mut cut = msg.clone();
+    while bytes.len() > MAX_DATAGRAM {
+        let longest = cut
+            .args
+            .iter_mut()
+            .filter_map(|a| match a {
+                OscType::String(s) if s.len() > 64 => Some(s),
+                _ => None,
+            })
+            .max_by_key(|s| s.len());
+        let Some(s) = longest else {
+            return Err(format!(
+                "{} is {} bytes, over the {MAX_DATAGRAM}-byte datagram limit",
+                msg.addr,
+                bytes.len()
+            ));
+        };
+        let mut keep = s.len() / 2;
+        while !s.is_char_boundary(keep) {
+            keep -= 1;
+        }
+        s.truncate(keep);
+        s.push('…');
+        bytes = encode(&cut)?;
+    }
+    Ok(bytes)
 }
 
 /// Parses a listen address from the config; "" is off.
@@ -616,6 +712,30 @@ mod tests {
     fn io_errors_read_as_phrases() {
         let e = std::io::Error::from_raw_os_error(98);
         assert_eq!(plain(&e), "address already in use");
+    }
+
+    #[test]
+    fn datagram_replies_are_cut_to_fit() {
+        let long = "é".repeat(40_000);
+        let m = OscMessage {
+            addr: "/vo/error".into(),
+            args: vec![OscType::String(long.clone()), OscType::String(long)],
+        };
+        let bytes = encode_datagram(&m).unwrap();
+        assert!(bytes.len() <= MAX_DATAGRAM, "{}", bytes.len());
+        let (_, p) = rosc::decoder::decode_udp(&bytes).unwrap();
+        let OscPacket::Message(back) = p else {
+            panic!("{p:?}")
+        };
+        assert!(back.args.iter().all(|a| match a {
+            OscType::String(s) => s.starts_with("éé") && s.ends_with('…'),
+            _ => false,
+        }));
+        let small = OscMessage {
+            addr: "/vo/pong".into(),
+            args: vec![OscType::Int(1)],
+        };
+        assert_eq!(encode_datagram(&small).unwrap(), encode(&small).unwrap());
     }
 
     #[test]
