@@ -5,9 +5,9 @@ use std::sync::Arc;
 use rosc::{OscMessage, OscType};
 
 use super::{int, int_arg, num_arg, rgb_args, text};
-use crate::engine::session::Entry;
 use crate::engine::{Engine, msg};
 use crate::objective::{Aspects, Objective, Region};
+use crate::osc::Peer;
 use crate::osc::args::{self, Request};
 
 pub enum Cmd {
@@ -85,28 +85,17 @@ impl Cmd {
         }))
     }
 
-    pub fn apply(self, e: &Arc<Engine>) -> Result<Vec<OscMessage>, String> {
+    pub fn apply(
+        self,
+        e: &Arc<Engine>,
+        peer: &Peer,
+        addr: &str,
+    ) -> Result<Vec<OscMessage>, String> {
         match self {
             Cmd::Add { image, aspects } => {
-                let objective = e.load_reference(&image, aspects)?;
-                let mut s = e.session();
-                let id = s.next_id;
-                s.next_id += 1;
-                let st = objective.analysis.stats;
-                s.objectives.push(Entry { id, objective });
-                let status = e.status(&s);
-                e.persist(s, true);
-                e.notify(&[status]);
-                Ok(vec![msg(
-                    "/vo/objective/added",
-                    vec![
-                        int(id as usize),
-                        text(aspects.name()),
-                        OscType::Float(st.mean_l),
-                        OscType::Float(st.key_l),
-                        OscType::Float(st.bright),
-                    ],
-                )])
+                // Answered by the reader thread once the image is in.
+                e.add_objective(addr, image, aspects, peer)?;
+                Ok(Vec::new())
             }
             Cmd::Aspects { id, aspects } => {
                 let mut s = e.session();

@@ -32,6 +32,26 @@ use session::{Gallery, Session};
 /// How long a subscription lasts without a message from its subscriber (osc.md).
 const SUBSCRIPTION: Duration = Duration::from_secs(600);
 
+/// References that may wait to be read at once; further adds are refused until the queue
+/// drains (a flood of adds of a 64-megapixel image must not take all the memory).
+const LOAD_QUEUE: usize = 8;
+
+/// An `/vo/objective/add` waiting for its image to be read.
+struct LoadJob {
+    /// The address as sent, for naming it in an error.
+    addr: String,
+    image: String,
+    aspects: crate::objective::Aspects,
+    peer: Peer,
+}
+
+/// Adds waiting for the reader thread, and whether that thread is running.
+#[derive(Default)]
+struct Loads {
+    queue: std::collections::VecDeque<LoadJob>,
+    running: bool,
+}
+
 /// A client that asked for state changes.
 #[derive(Debug, Clone)]
 struct Subscriber {
@@ -52,6 +72,7 @@ pub struct Engine {
     output: Mutex<Option<Output>>,
     session: Mutex<Session>,
     generating: AtomicBool,
+    loads: Mutex<Loads>,
     files: Files,
     writer: Writer,
     subscribers: Mutex<Vec<Subscriber>>,
@@ -81,6 +102,7 @@ impl Engine {
             output: Mutex::new(Some(output)),
             session: Mutex::new(session),
             generating: AtomicBool::new(false),
+            loads: Mutex::default(),
             writer: Writer::start(files.clone())?,
             files,
             subscribers: Mutex::new(Vec::new()),
@@ -146,7 +168,8 @@ impl Engine {
     }
 
     /// Reads and analyses a reference image from the references folder, refusing paths
-    /// that lead outside it (absolute paths, `..`, links).
+    /// that lead outside it (absolute paths, `..`, links). Slow for a big image: call it off
+    /// the OSC receive task ([`Engine::add_objective`]).
     pub fn load_reference(
         &self,
         name: &str,
@@ -164,6 +187,87 @@ impl Engine {
                 self.palette_size,
             ),
         })
+    }
+
+    /// Queues `/vo/objective/add` for the reader thread, which reads the image, adds the
+    /// objective and answers `peer` (`/vo/objective/added` or `/vo/error` naming `addr`).
+    /// Decoding a large image takes a second or more: on the OSC receive task it would hold
+    /// up every other sender's messages. Adds are read one at a time, in order.
+    pub fn add_objective(
+        self: &Arc<Self>,
+        addr: &str,
+        image: String,
+        aspects: crate::objective::Aspects,
+        peer: &Peer,
+    ) -> Result<(), String> {
+        let mut loads = self.loads.lock().unwrap_or_else(|p| p.into_inner());
+        if loads.queue.len() >= LOAD_QUEUE {
+            return Err(format!(
+                "{LOAD_QUEUE} reference images are already waiting to be read; add {image} again once they are in"
+            ));
+        }
+        if !loads.running {
+            let engine = Arc::clone(self);
+            std::thread::Builder::new()
+                .name("references".into())
+                .spawn(move || engine.read_references())
+                .map_err(|e| format!("cannot start reading {image}: {e}"))?;
+            loads.running = true;
+        }
+        loads.queue.push_back(LoadJob {
+            addr: addr.to_string(),
+            image,
+            aspects,
+            peer: peer.clone(),
+        });
+        Ok(())
+    }
+
+    /// The reader thread: answers queued adds until the queue is empty.
+    fn read_references(&self) {
+        loop {
+            let job = {
+                let mut loads = self.loads.lock().unwrap_or_else(|p| p.into_inner());
+                match loads.queue.pop_front() {
+                    Some(job) => job,
+                    None => {
+                        loads.running = false;
+                        return;
+                    }
+                }
+            };
+            let reply = match self.load_reference(&job.image, job.aspects) {
+                Ok(objective) => self.install_objective(objective),
+                Err(e) => {
+                    tracing::info!("{} from {}: {e}", job.addr, job.peer.addr());
+                    error(&job.addr, &e)
+                }
+            };
+            job.peer.reply(&[reply]);
+        }
+    }
+
+    /// Adds a read objective to the session (durably); its `/vo/objective/added`.
+    fn install_objective(&self, objective: Objective) -> OscMessage {
+        let mut s = self.session();
+        let id = s.next_id;
+        s.next_id += 1;
+        let st = objective.analysis.stats;
+        let aspects = objective.aspects;
+        s.objectives.push(session::Entry { id, objective });
+        let status = self.status(&s);
+        self.persist(s, true);
+        self.notify(&[status]);
+        msg(
+            "/vo/objective/added",
+            vec![
+                OscType::Int(id as i32),
+                OscType::String(aspects.name().to_string()),
+                OscType::Float(st.mean_l),
+                OscType::Float(st.key_l),
+                OscType::Float(st.bright),
+            ],
+        )
     }
 
     /// Starts a generate on its own thread; the reply (`/vo/generated`) goes to `peer`
