@@ -188,8 +188,21 @@ pub struct Objective {
 /// Decodes a reference image (PNG, JPEG) to 8-bit sRGB, refusing non-images and images
 /// over [`MAX_REFERENCE_PIXELS`] before allocating them.
 pub fn decode_reference(path: &Path) -> Result<image::RgbImage, String> {
-    let reader = image::ImageReader::open(path)
-        .map_err(|e| format!("cannot open it: {e}"))?
+    decode_with(|| image::ImageReader::open(path).map_err(|e| format!("cannot open it: {e}")))
+}
+
+/// [`decode_reference`] of a file's bytes already in memory: the same checks and limits,
+/// without the file system (the fuzz target drives this).
+pub fn decode_reference_bytes(bytes: &[u8]) -> Result<image::RgbImage, String> {
+    decode_with(|| Ok(image::ImageReader::new(std::io::Cursor::new(bytes))))
+}
+
+/// Reads the header first (refusing what is too large before any pixel is decoded), then
+/// decodes through a second reader from `open`.
+fn decode_with<R: std::io::BufRead + std::io::Seek>(
+    open: impl Fn() -> Result<image::ImageReader<R>, String>,
+) -> Result<image::RgbImage, String> {
+    let reader = open()?
         .with_guessed_format()
         .map_err(|e| format!("cannot read it: {e}"))?;
     if reader.format().is_none() {
@@ -207,8 +220,7 @@ pub fn decode_reference(path: &Path) -> Result<image::RgbImage, String> {
     if w == 0 || h == 0 {
         return Err("has no pixels".into());
     }
-    let mut reader = image::ImageReader::open(path)
-        .map_err(|e| format!("cannot open it: {e}"))?
+    let mut reader = open()?
         .with_guessed_format()
         .map_err(|e| format!("cannot read it: {e}"))?;
     let mut limits = image::Limits::default();
@@ -216,7 +228,7 @@ pub fn decode_reference(path: &Path) -> Result<image::RgbImage, String> {
     limits.max_image_height = Some(h);
     limits.max_alloc = Some(MAX_REFERENCE_PIXELS * 16);
     reader.limits(limits);
-    let img = std::panic::catch_unwind(move || reader.decode())
+    let img = std::panic::catch_unwind(std::panic::AssertUnwindSafe(move || reader.decode()))
         .map_err(|_| "is corrupt (the decoder gave up)".to_string())?
         .map_err(|e| format!("is not a readable image: {e}"))?;
     Ok(img.to_rgb8())

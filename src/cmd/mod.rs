@@ -21,6 +21,7 @@ use crate::engine::Engine;
 use crate::look::Look;
 use crate::osc::Peer;
 use crate::osc::args::{self, Request};
+use crate::osc::packet::{self, Item, PacketError};
 use crate::scene::Scene;
 
 /// Every command the daemon understands.
@@ -63,9 +64,27 @@ impl Command {
         ))
     }
 
-    fn apply(self, e: &Arc<Engine>, peer: &Peer) -> Result<Vec<OscMessage>, String> {
+    /// The address family, for [`parse`]'s callers.
+    fn family(&self) -> &'static str {
         match self {
-            Command::Objective(c) => c.apply(e),
+            Command::Objective(_) => "objective",
+            Command::Constraint(_) => "constraint",
+            Command::Generate(_) => "generate",
+            Command::Gallery(_) => "gallery",
+            Command::Live(_) => "live",
+            Command::Looks(_) => "looks",
+            Command::Status(_) => "status",
+        }
+    }
+
+    fn apply(
+        self,
+        e: &Arc<Engine>,
+        m: &OscMessage,
+        peer: &Peer,
+    ) -> Result<Vec<OscMessage>, String> {
+        match self {
+            Command::Objective(c) => c.apply(e, peer, &m.addr),
             Command::Constraint(c) => c.apply(e),
             Command::Generate(c) => c.apply(e, peer),
             Command::Gallery(c) => c.apply(e),
@@ -79,7 +98,25 @@ impl Command {
 /// Parses and applies one message: its replies, or the sentence for `/vo/error`.
 pub fn run(e: &Arc<Engine>, m: &OscMessage, peer: &Peer) -> Result<Vec<OscMessage>, String> {
     let req = Request::new(m);
-    Command::parse(&req)?.apply(e, peer)
+    Command::parse(&req)?.apply(e, m, peer)
+}
+
+/// Reads one received packet (a datagram or a stream frame) the way the daemon does, up to
+/// the commands and without an engine: for each message the server would hand on, the
+/// command family it names or the sentence of its `/vo/error`. A pure function, so the
+/// fuzz targets (fuzz/) and tests can drive the whole parsing path with arbitrary bytes.
+pub fn parse(bytes: &[u8]) -> Result<Vec<Result<&'static str, String>>, PacketError> {
+    Ok(packet::decode_items(bytes)?
+        .into_iter()
+        .filter_map(|item| match item {
+            Item::Message(m) => {
+                let req = Request::new(&m);
+                (!(m.args.len() <= 1 && req.is_button_release()))
+                    .then(|| Command::parse(&req).map(|c| c.family()))
+            }
+            Item::Malformed { why, .. } => Some(Err(why)),
+        })
+        .collect())
 }
 
 /// Argument `i` as a whole number in `min..=max`.
