@@ -4,8 +4,6 @@
 
 mod common;
 
-use std::path::Path;
-
 use common::daemon::{Daemon, Osc, float, int, num, string, text};
 use rosc::OscMessage;
 
@@ -95,39 +93,6 @@ fn add_refuses_bad_arguments() {
     );
 }
 
-/// A PNG whose header claims 9000x9000 (81 megapixels) with no pixel data behind it.
-fn huge_png(path: &Path) {
-    fn crc32(bytes: &[u8]) -> u32 {
-        let mut c = 0xffff_ffffu32;
-        for &b in bytes {
-            c ^= u32::from(b);
-            for _ in 0..8 {
-                c = if c & 1 != 0 {
-                    0xedb8_8320 ^ (c >> 1)
-                } else {
-                    c >> 1
-                };
-            }
-        }
-        !c
-    }
-    let mut png = b"\x89PNG\r\n\x1a\n".to_vec();
-    let mut chunk = |kind: &[u8], data: &[u8]| {
-        png.extend((data.len() as u32).to_be_bytes());
-        let mut body = kind.to_vec();
-        body.extend_from_slice(data);
-        png.extend_from_slice(&body);
-        png.extend(crc32(&body).to_be_bytes());
-    };
-    let mut ihdr = 9000u32.to_be_bytes().to_vec();
-    ihdr.extend(9000u32.to_be_bytes());
-    ihdr.extend([8, 2, 0, 0, 0]);
-    chunk(b"IHDR", &ihdr);
-    chunk(b"IDAT", &[0x78, 0x9c, 0x03, 0x00, 0x00, 0x00, 0x00, 0x01]);
-    chunk(b"IEND", &[]);
-    std::fs::write(path, png).expect("write huge.png");
-}
-
 #[test]
 fn hostile_image_paths_are_refused() {
     let mut d = Daemon::start("obj-hostile");
@@ -137,7 +102,7 @@ fn hostile_image_paths_are_refused() {
     std::os::unix::fs::symlink("grey.png", refs.join("alias.png")).expect("symlink in");
     std::fs::write(refs.join("notes.png"), "not an image\n").expect("write");
     std::fs::create_dir_all(refs.join("folder.png")).expect("mkdir");
-    huge_png(&refs.join("huge.png"));
+    common::png_header_only(&refs.join("huge.png"), 9000, 9000);
     d.add_objective("grey.png", "both");
     for image in [
         "../outside.png".to_string(),

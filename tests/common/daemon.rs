@@ -7,7 +7,7 @@
 use std::collections::{BTreeMap, VecDeque};
 use std::fs::File;
 use std::io::{ErrorKind, Read, Write};
-use std::net::{SocketAddr, TcpListener, TcpStream, UdpSocket};
+use std::net::{IpAddr, Ipv4Addr, SocketAddr, TcpListener, TcpStream, UdpSocket};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::sync::atomic::{AtomicBool, AtomicI32, Ordering};
@@ -1016,13 +1016,40 @@ pub fn look_mismatch(look: &[Light], dmx: &BTreeMap<u16, Vec<u8>>) -> Option<Str
 
 // ---- the daemon --------------------------------------------------------------------------
 
-/// A UDP port that is free for both UDP and TCP on 127.0.0.1 right now.
-fn free_port() -> u16 {
+/// A port that is free for UDP on `udp` and TCP on `tcp` right now.
+fn free_port(udp: IpAddr, tcp: IpAddr) -> u16 {
     loop {
-        let udp = UdpSocket::bind("127.0.0.1:0").expect("bind");
-        let port = udp.local_addr().expect("addr").port();
-        if TcpListener::bind(("127.0.0.1", port)).is_ok() {
+        let sock = UdpSocket::bind((udp, 0)).expect("bind");
+        let port = sock.local_addr().expect("addr").port();
+        if TcpListener::bind((tcp, port)).is_ok() {
             return port;
+        }
+    }
+}
+
+/// How a test daemon listens and whom it lets in; [`Setup::default`] is what
+/// [`Daemon::start`] runs: everything on 127.0.0.1, the default (loopback) allow-list.
+#[derive(Debug, Clone)]
+pub struct Setup {
+    /// Address of `osc.udp` (the port is picked free, the same for both).
+    pub udp: IpAddr,
+    /// Address of `osc.tcp`.
+    pub tcp: IpAddr,
+    /// `osc.allow`.
+    pub allow: Vec<String>,
+    /// Where the harness's own clients send from: it must be allowed.
+    pub client: IpAddr,
+}
+
+pub const LOCALHOST: IpAddr = IpAddr::V4(Ipv4Addr::LOCALHOST);
+
+impl Default for Setup {
+    fn default() -> Self {
+        Setup {
+            udp: LOCALHOST,
+            tcp: LOCALHOST,
+            allow: Vec::new(),
+            client: LOCALHOST,
         }
     }
 }
@@ -1033,6 +1060,7 @@ pub struct Daemon {
     pub dir: PathBuf,
     config: PathBuf,
     pub port: u16,
+    pub setup: Setup,
     child: Option<Child>,
     starts: u32,
     log: PathBuf,
@@ -1043,6 +1071,11 @@ pub struct Daemon {
 impl Daemon {
     /// Builds the stage in a fresh folder named after the test and starts the daemon.
     pub fn start(name: &str) -> Daemon {
+        Daemon::start_with(name, Setup::default())
+    }
+
+    /// [`Daemon::start`] with other listen addresses and allow-list.
+    pub fn start_with(name: &str, setup: Setup) -> Daemon {
         let dir = temp_dir(&format!("daemon-{name}"));
         build_stage(&dir);
         let wire = Wire::start();
@@ -1053,16 +1086,18 @@ impl Daemon {
             port: 0,
             child: None,
             starts: 0,
-            osc: udp_client(0, &log),
+            osc: udp_client(setup.client, SocketAddr::new(setup.udp, 0), &log),
+            setup,
             log,
             wire,
         };
         let mut last = String::new();
         for _ in 0..3 {
             // Another test may take the port between the probe and the daemon's bind.
-            d.port = free_port();
-            std::fs::write(&d.config, config_text(d.port, &d.wire)).expect("write config");
-            d.osc = udp_client(d.port, &d.log);
+            d.port = free_port(d.setup.udp, d.setup.tcp);
+            std::fs::write(&d.config, config_text(d.port, &d.setup, &d.wire))
+                .expect("write config");
+            d.osc = d.client_from(d.setup.client);
             match d.spawn() {
                 Ok(()) => return d,
                 Err(e) => last = e,
@@ -1121,12 +1156,27 @@ impl Daemon {
 
     /// A new UDP client from its own port.
     pub fn client(&self) -> Udp {
-        udp_client(self.port, &self.log)
+        self.client_from(self.setup.client)
+    }
+
+    /// A new UDP client from its own port on `ip` (any loopback address).
+    pub fn client_from(&self, ip: IpAddr) -> Udp {
+        udp_client(ip, SocketAddr::new(self.setup.udp, self.port), &self.log)
     }
 
     /// A new TCP connection in `framing`.
     pub fn tcp(&self, framing: Framing) -> Tcp {
-        let stream = TcpStream::connect(("127.0.0.1", self.port)).expect("TCP connect");
+        self.tcp_from(self.setup.client, framing)
+    }
+
+    /// The daemon's TCP address.
+    pub fn tcp_addr(&self) -> SocketAddr {
+        SocketAddr::new(self.setup.tcp, self.port)
+    }
+
+    /// A new TCP connection from `ip` (any loopback address) in `framing`.
+    pub fn tcp_from(&self, ip: IpAddr, framing: Framing) -> Tcp {
+        let stream = connect_from(ip, self.tcp_addr()).expect("TCP connect");
         stream.set_nodelay(true).expect("nodelay");
         Tcp {
             stream,
@@ -1139,6 +1189,29 @@ impl Daemon {
 
     pub fn pid(&self) -> u32 {
         self.child.as_ref().expect("running").id()
+    }
+
+    /// The daemon's resident memory (VmRSS), in KiB.
+    pub fn rss_kib(&self) -> u64 {
+        let status = std::fs::read_to_string(format!("/proc/{}/status", self.pid()))
+            .expect("/proc/PID/status");
+        status
+            .lines()
+            .find_map(|l| l.strip_prefix("VmRSS:"))
+            .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
+            .expect("a VmRSS line")
+    }
+
+    /// Whether the process is still running (it has not exited).
+    pub fn alive(&mut self) -> bool {
+        self.child
+            .as_mut()
+            .is_some_and(|c| c.try_wait().expect("wait").is_none())
+    }
+
+    /// The whole stderr log of the current run.
+    pub fn log_text(&self) -> String {
+        std::fs::read_to_string(&self.log).unwrap_or_default()
     }
 
     /// SIGKILL, and waits for the process to go.
@@ -1204,24 +1277,43 @@ impl Drop for Daemon {
     }
 }
 
-fn udp_client(port: u16, log: &Path) -> Udp {
+fn udp_client(from: IpAddr, to: SocketAddr, log: &Path) -> Udp {
     Udp {
-        sock: UdpSocket::bind("127.0.0.1:0").expect("bind a client"),
-        to: SocketAddr::from(([127, 0, 0, 1], port)),
+        sock: UdpSocket::bind((from, 0)).expect("bind a client"),
+        to,
         queue: VecDeque::new(),
         log: log.to_path_buf(),
     }
 }
 
-fn config_text(port: u16, wire: &Wire) -> String {
+/// A TCP connection to `to` from `ip` (std cannot bind before connecting; tokio can).
+pub fn connect_from(ip: IpAddr, to: SocketAddr) -> std::io::Result<TcpStream> {
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_io()
+        .build()?;
+    let stream = rt.block_on(async {
+        let sock = match ip {
+            IpAddr::V4(_) => tokio::net::TcpSocket::new_v4()?,
+            IpAddr::V6(_) => tokio::net::TcpSocket::new_v6()?,
+        };
+        sock.bind(SocketAddr::new(ip, 0))?;
+        sock.connect(to).await?.into_std()
+    })?;
+    stream.set_nonblocking(false)?;
+    Ok(stream)
+}
+
+fn config_text(port: u16, setup: &Setup, wire: &Wire) -> String {
+    let allow: Vec<String> = setup.allow.iter().map(|a| format!("{a:?}")).collect();
     format!(
         r#"scene = "scene"
 references = "refs"
 state_dir = "state"
 
 [osc]
-udp = "127.0.0.1:{port}"
-tcp = "127.0.0.1:{port}"
+udp = "{udp}"
+tcp = "{tcp}"
+allow = [{allow}]
 
 [output]
 rate_hz = {RATE_HZ}
@@ -1244,6 +1336,9 @@ universe_offset = {ARTNET_OFFSET}
 count = {COUNT}
 clusters = {CLUSTERS}
 "#,
+        udp = SocketAddr::new(setup.udp, port),
+        tcp = SocketAddr::new(setup.tcp, port),
+        allow = allow.join(", "),
         sacn = wire.sacn_port,
         artnet = wire.artnet_port,
     )

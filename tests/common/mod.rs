@@ -90,6 +90,55 @@ pub fn temp_dir(name: &str) -> PathBuf {
     dir
 }
 
+/// A PNG whose header claims `w` x `h` (RGB, 8 bits) with no pixel data behind it: refused
+/// by its header alone when it is over the size limit.
+pub fn png_header_only(path: &Path, w: u32, h: u32) {
+    fn crc32(bytes: &[u8]) -> u32 {
+        let mut c = 0xffff_ffffu32;
+        for &b in bytes {
+            c ^= u32::from(b);
+            for _ in 0..8 {
+                c = if c & 1 != 0 {
+                    0xedb8_8320 ^ (c >> 1)
+                } else {
+                    c >> 1
+                };
+            }
+        }
+        !c
+    }
+    let mut png = b"\x89PNG\r\n\x1a\n".to_vec();
+    let mut chunk = |kind: &[u8], data: &[u8]| {
+        png.extend((data.len() as u32).to_be_bytes());
+        let mut body = kind.to_vec();
+        body.extend_from_slice(data);
+        png.extend_from_slice(&body);
+        png.extend(crc32(&body).to_be_bytes());
+    };
+    let mut ihdr = w.to_be_bytes().to_vec();
+    ihdr.extend(h.to_be_bytes());
+    ihdr.extend([8, 2, 0, 0, 0]);
+    chunk(b"IHDR", &ihdr);
+    chunk(b"IDAT", &[0x78, 0x9c, 0x03, 0x00, 0x00, 0x00, 0x00, 0x01]);
+    chunk(b"IEND", &[]);
+    std::fs::write(path, png).expect("write a header-only PNG");
+}
+
+/// A real, decodable PNG of `w` x `h` black pixels: a few hundred KiB on disk that decode
+/// to `3 w h` bytes (a decompression bomb when large).
+pub fn png_bomb(path: &Path, w: u32, h: u32) {
+    use image::ImageEncoder;
+    let pixels = vec![0u8; w as usize * h as usize * 3];
+    let file = std::io::BufWriter::new(std::fs::File::create(path).expect("create bomb"));
+    image::codecs::png::PngEncoder::new_with_quality(
+        file,
+        image::codecs::png::CompressionType::Fast,
+        image::codecs::png::FilterType::NoFilter,
+    )
+    .write_image(&pixels, w, h, image::ExtendedColorType::Rgb8)
+    .expect("write bomb");
+}
+
 /// A reference image from a function of pixel position.
 pub fn write_png(path: &Path, w: u32, h: u32, f: impl Fn(u32, u32) -> [u8; 3]) {
     let img = image::RgbImage::from_fn(w, h, |x, y| image::Rgb(f(x, y)));

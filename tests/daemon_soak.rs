@@ -1,0 +1,133 @@
+//! Soak: an hour of simulated use at 10x speed (6 minutes real time) against the real
+//! daemon: a scripted, seeded mix of generates, picks, next/prev, fades, faders, saves and
+//! recalls, as a designer working a tablet. Reports RSS growth, the DMX frame rate and its
+//! worst gap, and every unexpected error.
+//!
+//! `#[ignore]`d (six minutes):
+//! `cargo test --release --test daemon_soak -- --ignored --nocapture`
+//! (`VISOBJD_SOAK_SECS` sets the real duration; 360 is the simulated hour.)
+
+mod common;
+
+use std::time::{Duration, Instant};
+
+use common::daemon::{Daemon, Osc, PERIOD, PROTOS, RATE_HZ, UNIVERSES, float, int, num, string};
+
+const GAP: Duration = Duration::from_millis(2 * PERIOD.as_millis() as u64);
+
+#[test]
+#[ignore = "six minutes: run with --ignored"]
+fn an_hour_of_simulated_use() {
+    let secs: u64 = std::env::var("VISOBJD_SOAK_SECS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(360);
+    let mut d = Daemon::start("soak");
+    for proto in PROTOS {
+        for u in UNIVERSES {
+            d.wire.wait(proto, u, "a first frame", |_| true);
+        }
+    }
+    d.add_objective("warm.png", "both");
+    d.add_objective("split.png", "intensity");
+    let rss_start = d.rss_kib();
+    let start = Instant::now();
+    let mut seed = 0x5eed_u64;
+    let mut rand = move |n: u64| {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        seed % n
+    };
+    let mut counts = std::collections::BTreeMap::<&str, u64>::new();
+    let mut errors = Vec::new();
+    let mut rss_samples = vec![(0u64, rss_start)];
+    let mut entries = 0i32;
+    let mut step = 0u64;
+    // One step every 100 ms real time = 1 s of the simulated hour.
+    while start.elapsed() < Duration::from_secs(secs) {
+        step += 1;
+        let due = start + Duration::from_millis(100 * step);
+        let (addr, args, reply): (&str, Vec<rosc::OscType>, &str) = match (step % 60, rand(10)) {
+            // A generate every simulated minute.
+            (0, _) => ("/vo/generate", vec![], "/vo/generated"),
+            _ if entries == 0 => ("/vo/status", vec![], "/vo/status"),
+            (_, 0..=2) => (
+                "/vo/pick",
+                vec![int(1 + rand(entries as u64) as i32)],
+                "/vo/picked",
+            ),
+            (_, 3) => ("/vo/next", vec![], "/vo/picked"),
+            (_, 4) => ("/vo/prev", vec![], "/vo/picked"),
+            (_, 5) => ("/vo/fade", vec![float(rand(5) as f32 * 0.1)], "/vo/fade"),
+            (_, 6) => (
+                "/vo/light/3/level",
+                vec![int(rand(101) as i32)],
+                "/vo/light",
+            ),
+            (_, 7) => (
+                "/vo/look/save",
+                vec![int(1 + rand(20) as i32), string("soak")],
+                "/vo/look/saved",
+            ),
+            (_, 8) if step > 100 => ("/vo/look/recall", vec![int(1 + rand(20) as i32)], ""),
+            _ => ("/vo/status", vec![], "/vo/status"),
+        };
+        *counts.entry(addr).or_default() += 1;
+        if addr == "/vo/generate" {
+            let g = d.generate();
+            entries = num(&g.args[1]) as i32;
+        } else if reply.is_empty() {
+            // A recall of a number that may not be saved: either answer is fine.
+            let got = d.call(addr, args, "/vo/look/recalled");
+            if let Some(m) = got.last().filter(|m| m.addr == "/vo/error") {
+                let why = common::daemon::text(&m.args[1]);
+                if !why.contains("no saved look") {
+                    errors.push(format!("{addr}: {why}"));
+                }
+            }
+        } else {
+            let got = d.call(addr, args, reply);
+            if let Some(m) = got.last().filter(|m| m.addr != reply) {
+                errors.push(format!("{addr}: {m:?}"));
+            }
+        }
+        if step.is_multiple_of(100) {
+            rss_samples.push((step / 10, d.rss_kib()));
+        }
+        if let Some(wait) = due.checked_duration_since(Instant::now()) {
+            std::thread::sleep(wait);
+        }
+    }
+    let end = Instant::now();
+    let rss_end = d.rss_kib();
+    let mut max_gap = Duration::ZERO;
+    let mut frames = 0usize;
+    for p in PROTOS {
+        for u in UNIVERSES {
+            max_gap = max_gap.max(d.wire.max_gap(p, u, start, end));
+            frames += d
+                .wire
+                .frames(p, u, start)
+                .iter()
+                .filter(|f| f.at <= end)
+                .count();
+        }
+    }
+    let real = (end - start).as_secs_f64();
+    let fps = frames as f64 / 4.0 / real;
+    println!("soak: {real:.0} s real ({step} simulated seconds), commands {counts:?}");
+    println!(
+        "soak: RSS {rss_start} KiB -> {rss_end} KiB (samples by simulated minute: {rss_samples:?})"
+    );
+    println!(
+        "soak: DMX {fps:.2} frames/s per universe and protocol (rate {RATE_HZ}), worst gap {max_gap:?}"
+    );
+    println!("soak: {} unexpected errors: {errors:?}", errors.len());
+    assert!(errors.is_empty(), "{errors:?}");
+    assert!(max_gap <= GAP, "worst DMX gap {max_gap:?}");
+    assert!(
+        rss_end.saturating_sub(rss_start) < 64 * 1024,
+        "RSS grew {rss_start} -> {rss_end} KiB"
+    );
+}
