@@ -59,6 +59,11 @@ impl Handler for TestHandler {
                 vec![msg("/flooded", vec![OscType::Bool(ok)])]
             }
             "/panic" => panic!("the test handler was asked to panic"),
+            // Stands in for a handler waiting on a slow disk.
+            "/slow" => {
+                std::thread::sleep(Duration::from_millis(300));
+                vec![msg("/slow", vec![])]
+            }
             _ => vec![msg(
                 "/vo/error",
                 vec![
@@ -207,6 +212,47 @@ fn too_deep_bundles_get_an_error_and_garbage_nothing() {
     nothing_arrives(&c);
     assert_eq!(h.server.not_osc(), 1);
     assert_eq!(h.handler.seen(), ["/echo", "/echo"]);
+}
+
+#[test]
+fn a_slow_sender_delays_only_itself_and_its_backlog_is_bounded() {
+    let h = serve_with(
+        loopback(),
+        Limits {
+            udp_backlog: 200,
+            ..Limits::default()
+        },
+    );
+    let slow = udp_client();
+    let quick = udp_client();
+    slow.send_to(&encode(&OscPacket::Message(msg("/slow", vec![]))), h.udp())
+        .unwrap();
+    // Its backlog (200 bytes) holds a few messages; the rest are dropped.
+    for i in 0..40 {
+        slow.send_to(&encode(&echo(i)), h.udp()).unwrap();
+    }
+    quick.send_to(&encode(&echo(99)), h.udp()).unwrap();
+    assert_eq!(ints(&recv(&quick)), [99]);
+    // The quick sender was answered while the slow one still waited on its handler.
+    slow.set_read_timeout(Some(Duration::from_millis(1)))
+        .unwrap();
+    let mut buf = [0u8; 1024];
+    assert!(slow.recv(&mut buf).is_err(), "the slow reply came first");
+    slow.set_read_timeout(Some(PATIENCE)).unwrap();
+    assert_eq!(recv(&slow).addr, "/slow");
+    // In order up to a fence: the ones over the backlog were dropped and counted.
+    slow.send_to(&encode(&echo(1000)), h.udp()).unwrap();
+    let mut got = Vec::new();
+    loop {
+        match ints(&recv(&slow))[..] {
+            [1000] => break,
+            [i] => got.push(i),
+            ref other => panic!("{other:?}"),
+        }
+    }
+    assert!(!got.is_empty() && got.len() < 40, "{got:?}");
+    assert!(got.windows(2).all(|w| w[0] < w[1]), "in order: {got:?}");
+    assert_eq!(h.server.dropped(), 40 - got.len() as u64);
 }
 
 #[test]

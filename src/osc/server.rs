@@ -3,9 +3,11 @@
 //!
 //! Everything the engine sees goes through [`Handler`]; everything between the socket and
 //! the handler lives here. Limits ([`Limits`]) keep one misbehaving client from costing
-//! others anything: a connection cap, an idle timeout, a frame size limit, and a bounded
-//! queue for replies sent after the fact.
+//! others anything: a connection cap, an idle timeout, a frame size limit, a bounded queue
+//! for replies sent after the fact, and a bounded backlog per UDP sender, each sender (and
+//! each connection) handled in order on a blocking thread of its own.
 
+use std::collections::{HashMap, VecDeque};
 use std::net::{IpAddr, SocketAddr};
 use std::panic::AssertUnwindSafe;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -26,9 +28,11 @@ use crate::config::{Cidr, OscConfig};
 
 /// What the engine implements to answer OSC.
 ///
-/// Called once per message, in arrival order per sender (bundles flattened, run at once),
-/// from the task that received it: it must return quickly (milliseconds) and run long work
-/// elsewhere, answering later through a clone of the [`Peer`]. It never sees messages
+/// Called once per message, in arrival order per sender (bundles flattened, run at once), on
+/// a blocking thread that serves only that sender (a UDP source address or a TCP
+/// connection) for the moment: it may wait on the disk without holding up anyone else, but
+/// long work (a second or more) belongs elsewhere, answered later through a clone of the
+/// [`Peer`]. It never sees messages
 /// from senders outside the allow-list, packets that are not OSC, or button releases
 /// ([`Request::is_button_release`]). The returned messages are sent to the sender, in
 /// order. A panic in the handler is caught and answered with `/vo/error`.
@@ -59,6 +63,12 @@ pub struct Limits {
     /// Replies a connection may have queued ([`Peer::reply`]) before it is dropped as too
     /// slow.
     pub reply_queue: usize,
+    /// Bytes of datagrams one UDP sender may have waiting while its earlier ones are
+    /// handled; more are dropped (and counted), so a flood costs only its sender.
+    pub udp_backlog: usize,
+    /// UDP senders whose datagrams are waiting or being handled at once; datagrams from
+    /// further senders are dropped until one has caught up.
+    pub udp_senders: usize,
 }
 
 impl Default for Limits {
@@ -68,6 +78,8 @@ impl Default for Limits {
             idle_timeout: Duration::from_secs(60),
             max_frame: framing::MAX_FRAME,
             reply_queue: 256,
+            udp_backlog: 256 * 1024,
+            udp_senders: 64,
         }
     }
 }
@@ -222,6 +234,8 @@ impl Server {
             limits,
             refused: AtomicU64::new(0),
             not_osc: AtomicU64::new(0),
+            dropped: AtomicU64::new(0),
+            dropped_log: Mutex::default(),
             refused_log: Mutex::default(),
             not_osc_log: Mutex::default(),
             busy_log: Mutex::default(),
@@ -290,6 +304,11 @@ impl Server {
         self.shared.not_osc.load(Ordering::Relaxed)
     }
 
+    /// Datagrams dropped because their sender was too far behind, or too many senders were.
+    pub fn dropped(&self) -> u64 {
+        self.shared.dropped.load(Ordering::Relaxed)
+    }
+
     /// Stops listening and closes every connection; returns once the tasks are gone (the
     /// TCP port is free; the UDP port once no [`Sender`] is left).
     pub async fn stop(mut self) {
@@ -318,6 +337,8 @@ struct Shared {
     limits: Limits,
     refused: AtomicU64,
     not_osc: AtomicU64,
+    dropped: AtomicU64,
+    dropped_log: Mutex<Throttle>,
     refused_log: Mutex<Throttle>,
     not_osc_log: Mutex<Throttle>,
     busy_log: Mutex<Throttle>,
@@ -445,10 +466,17 @@ fn transport_error(addr: String, message: String) -> OscMessage {
     }
 }
 
+/// Datagrams waiting per UDP sender, with their total size. A sender is in the map exactly
+/// while a worker task serves it.
+type Backlogs = Arc<Mutex<HashMap<SocketAddr, (VecDeque<Vec<u8>>, usize)>>>;
+
+/// Receives datagrams and hands them to one worker per sender: a sender whose messages wait
+/// on the disk (saves) or flood in delays only itself, never a well-behaved client.
 async fn udp_loop(sender: Sender, shared: Arc<Shared>) {
     let socket = sender.socket.clone();
     let mut buf = vec![0u8; 65536];
     let mut error_log = Throttle::default();
+    let backlogs = Backlogs::default();
     loop {
         let (n, from) = match socket.recv_from(&mut buf).await {
             Ok(got) => got,
@@ -462,12 +490,75 @@ async fn udp_loop(sender: Sender, shared: Arc<Shared>) {
         if !shared.permits(from) {
             continue;
         }
-        let peer = Peer {
-            addr: from,
-            reply_addr: shared.reply_addr(from),
-            route: Route::Udp(sender.clone()),
+        let mut map = backlogs.lock().unwrap_or_else(|p| p.into_inner());
+        let at_cap = map.len() >= shared.limits.udp_senders;
+        let full = match map.get_mut(&from) {
+            Some((queue, bytes)) => {
+                let full = *bytes + n > shared.limits.udp_backlog;
+                if !full {
+                    queue.push_back(buf[..n].to_vec());
+                    *bytes += n;
+                }
+                full
+            }
+            None if at_cap => true,
+            None => {
+                map.insert(from, (VecDeque::from([buf[..n].to_vec()]), n));
+                tokio::spawn(serve_sender(
+                    from,
+                    backlogs.clone(),
+                    sender.clone(),
+                    shared.clone(),
+                ));
+                false
+            }
         };
-        for reply in shared.dispatch(&buf[..n], &peer) {
+        drop(map);
+        if full {
+            shared.dropped.fetch_add(1, Ordering::Relaxed);
+            if let Some(n) = throttled(&shared.dropped_log) {
+                warn!(
+                    "OSC over UDP: dropped a datagram from {from}: it or too many senders are too far behind ({n} dropped since the last report)"
+                );
+            }
+        }
+    }
+}
+
+/// Serves one UDP sender's backlog in order until it is empty, handling on a blocking
+/// thread and answering from the server's socket.
+async fn serve_sender(from: SocketAddr, backlogs: Backlogs, sender: Sender, shared: Arc<Shared>) {
+    let peer = Peer {
+        addr: from,
+        reply_addr: shared.reply_addr(from),
+        route: Route::Udp(sender.clone()),
+    };
+    loop {
+        let batch: Vec<Vec<u8>> = {
+            let mut map = backlogs.lock().unwrap_or_else(|p| p.into_inner());
+            match map.get_mut(&from) {
+                Some((queue, bytes)) if !queue.is_empty() => {
+                    *bytes = 0;
+                    queue.drain(..).collect()
+                }
+                _ => {
+                    // Empty: done. Checked and removed under the lock the receiver pushes
+                    // under, so nothing is left behind.
+                    map.remove(&from);
+                    return;
+                }
+            }
+        };
+        let (handler_shared, handler_peer) = (shared.clone(), peer.clone());
+        let replies = tokio::task::spawn_blocking(move || {
+            batch
+                .iter()
+                .flat_map(|bytes| handler_shared.dispatch(bytes, &handler_peer))
+                .collect::<Vec<_>>()
+        })
+        .await
+        .unwrap_or_default();
+        for reply in replies {
             let bytes = match encode_datagram(&reply) {
                 Ok(bytes) => bytes,
                 Err(e) => {
@@ -475,7 +566,7 @@ async fn udp_loop(sender: Sender, shared: Arc<Shared>) {
                     continue;
                 }
             };
-            if let Err(e) = socket.send_to(&bytes, peer.reply_addr).await {
+            if let Err(e) = sender.socket.send_to(&bytes, peer.reply_addr).await {
                 debug!("OSC: reply to {} failed: {e}", peer.reply_addr);
             }
         }
@@ -564,20 +655,29 @@ async fn connection(stream: TcpStream, from: SocketAddr, shared: Arc<Shared>) {
                     reply_addr: shared.reply_addr(from),
                     route: Route::Tcp(Link { queue: queue.clone(), framing, kill: kill.clone() }),
                 };
-                let mut out = Vec::new();
-                for frame in frames.drain(..) {
-                    let replies = match frame {
-                        Frame::Packet(p) => shared.dispatch(&p, &peer),
-                        Frame::Oversize { len, head } => {
-                            shared.oversize(len, &head, from).into_iter().collect()
-                        }
-                    };
-                    for reply in replies {
-                        if let Ok(bytes) = encode(&reply) {
-                            out.extend(framing::encode(framing, &bytes));
+                // Handled on a blocking thread: a save waiting on the disk holds only this
+                // connection, not the runtime's workers.
+                let batch = std::mem::take(&mut frames);
+                let handler_shared = shared.clone();
+                let out = tokio::task::spawn_blocking(move || {
+                    let mut out = Vec::new();
+                    for frame in batch {
+                        let replies = match frame {
+                            Frame::Packet(p) => handler_shared.dispatch(&p, &peer),
+                            Frame::Oversize { len, head } => {
+                                handler_shared.oversize(len, &head, from).into_iter().collect()
+                            }
+                        };
+                        for reply in replies {
+                            if let Ok(bytes) = encode(&reply) {
+                                out.extend(framing::encode(framing, &bytes));
+                            }
                         }
                     }
-                }
+                    out
+                })
+                .await
+                .unwrap_or_default();
                 if let Err(e) = write(&mut wr, &out, deadline).await {
                     break e;
                 }
