@@ -236,7 +236,18 @@ impl Engine {
                     }
                 }
             };
-            let reply = match self.load_reference(&job.image, job.aspects) {
+            // A decoder or analysis panic must not end the thread: the queue would stall.
+            let loaded = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                self.load_reference(&job.image, job.aspects)
+            }))
+            .unwrap_or_else(|_| {
+                tracing::error!("reading {} panicked", job.image);
+                Err(format!(
+                    "{} could not be read (internal error; see the daemon's log)",
+                    job.image
+                ))
+            });
+            let reply = match loaded {
                 Ok(objective) => self.install_objective(objective),
                 Err(e) => {
                     tracing::info!("{} from {}: {e}", job.addr, job.peer.addr());
