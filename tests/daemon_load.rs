@@ -40,8 +40,27 @@ fn encode(p: &rosc::OscPacket) -> Vec<u8> {
     rosc::encoder::encode(p).expect("encode")
 }
 
+/// What the flood sends.
+#[derive(Debug, Clone, Copy)]
+enum Flood {
+    /// Faders, status, unknown addresses, broken and non-OSC packets.
+    Mixed,
+    /// Saves of looks and recalls: every one a durable write to the state folder.
+    Saves,
+}
+
 /// The flood's packets, sent round-robin.
-fn flood_packets() -> Vec<Vec<u8>> {
+fn flood_packets(flood: Flood) -> Vec<Vec<u8>> {
+    if let Flood::Saves = flood {
+        return (1..=20)
+            .flat_map(|n| {
+                [
+                    encode(&msg("/vo/look/save", vec![int(n), string("flood")])),
+                    encode(&msg("/vo/look/recall", vec![int(n)])),
+                ]
+            })
+            .collect();
+    }
     let mut v: Vec<Vec<u8>> = (0..10)
         .map(|i| encode(&msg("/vo/light/1/level", vec![int(i * 10)])))
         .collect();
@@ -60,7 +79,7 @@ fn flood_packets() -> Vec<Vec<u8>> {
 
 /// Runs the load for `secs` seconds at `rate` flood messages a second with `tcp` TCP
 /// clients (a third idle, a third dribbling a byte a second, a third pinging every 100 ms).
-fn load(name: &str, secs: u64, rate: u64, tcp: usize) -> Report {
+fn load(name: &str, flood: Flood, secs: u64, rate: u64, tcp: usize) -> Report {
     let mut d = Daemon::start(name);
     for proto in PROTOS {
         for u in UNIVERSES {
@@ -88,7 +107,7 @@ fn load(name: &str, secs: u64, rate: u64, tcp: usize) -> Report {
     let start = Instant::now();
     let flood = std::thread::spawn(move || {
         let s = UdpSocket::bind("127.0.0.1:0").expect("bind");
-        let packets = flood_packets();
+        let packets = flood_packets(flood);
         let per_ms = rate / 1000;
         let mut sent = 0u64;
         let mut i = 0usize;
@@ -265,7 +284,7 @@ fn check(r: &Report, tcp: usize) {
 
 #[test]
 fn a_short_load_keeps_the_frames_and_the_answers() {
-    let r = load("load-short", 2, 5_000, 12);
+    let r = load("load-short", Flood::Mixed, 2, 5_000, 12);
     println!("{}", r.summary());
     check(&r, 12);
     assert_eq!(r.pings_lost, 0, "{r:?}");
@@ -274,10 +293,24 @@ fn a_short_load_keeps_the_frames_and_the_answers() {
 #[test]
 #[ignore = "10 s of 20,000 messages/s: run with --ignored"]
 fn ten_seconds_of_twenty_thousand_messages_a_second() {
-    let r = load("load-full", 10, 20_000, 50);
+    let r = load("load-full", Flood::Mixed, 10, 20_000, 50);
     println!("{}", r.summary());
     check(&r, 50);
     assert!(r.flood_sent >= 190_000, "{r:?}");
+    assert_eq!(r.pings_lost, 0, "{r:?}");
+    assert!(
+        r.p99 <= Duration::from_millis(50),
+        "ping p99 {:?}: {r:?}",
+        r.p99
+    );
+}
+
+#[test]
+#[ignore = "10 s of 2,000 saves and recalls/s: run with --ignored"]
+fn ten_seconds_of_two_thousand_saves_a_second() {
+    let r = load("load-saves", Flood::Saves, 10, 2_000, 50);
+    println!("{}", r.summary());
+    check(&r, 50);
     assert_eq!(r.pings_lost, 0, "{r:?}");
     assert!(
         r.p99 <= Duration::from_millis(50),

@@ -103,15 +103,25 @@ fn an_hour_of_simulated_use() {
     let rss_end = d.rss_kib();
     let mut max_gap = Duration::ZERO;
     let mut frames = 0usize;
+    // Gaps over the bound: (seconds into the run, length), every universe and protocol.
+    let mut over = Vec::new();
     for p in PROTOS {
         for u in UNIVERSES {
             max_gap = max_gap.max(d.wire.max_gap(p, u, start, end));
-            frames += d
+            let times: Vec<Instant> = d
                 .wire
                 .frames(p, u, start)
                 .iter()
-                .filter(|f| f.at <= end)
-                .count();
+                .map(|f| f.at)
+                .filter(|&t| t <= end)
+                .collect();
+            frames += times.len();
+            over.extend(
+                times
+                    .windows(2)
+                    .filter(|w| w[1] - w[0] > GAP)
+                    .map(|w| ((w[0] - start).as_secs_f32().round(), w[1] - w[0])),
+            );
         }
     }
     let real = (end - start).as_secs_f64();
@@ -121,7 +131,7 @@ fn an_hour_of_simulated_use() {
         "soak: RSS {rss_start} KiB -> {rss_end} KiB (samples by simulated minute: {rss_samples:?})"
     );
     println!(
-        "soak: DMX {fps:.2} frames/s per universe and protocol (rate {RATE_HZ}), worst gap {max_gap:?}"
+        "soak: DMX {fps:.2} frames/s per universe and protocol (rate {RATE_HZ}), worst gap {max_gap:?}; gaps over {GAP:?} (s into the run, length): {over:?}"
     );
     println!("soak: {} unexpected errors: {errors:?}", errors.len());
     assert!(errors.is_empty(), "{errors:?}");
