@@ -64,9 +64,11 @@ impl Cmd {
                 e.unsubscribe(peer);
                 Ok(vec![msg("/vo/unsubscribed", Vec::new())])
             }
-            Cmd::EosPreset(n) => Err(format!(
-                "cannot record preset {n}: no Eos console is configured for this daemon"
-            )),
+            Cmd::EosPreset(n) => {
+                // The reply goes to the peer once the console has the commands.
+                e.eos_preset(n, peer)?;
+                Ok(Vec::new())
+            }
         }
     }
 }

@@ -56,6 +56,7 @@ pub struct Engine {
     writer: Writer,
     subscribers: Mutex<Vec<Subscriber>>,
     push: OnceLock<Sender>,
+    eos: crate::eos::EosConfig,
 }
 
 impl Engine {
@@ -85,6 +86,7 @@ impl Engine {
             files,
             subscribers: Mutex::new(Vec::new()),
             push: OnceLock::new(),
+            eos: config.eos.clone(),
             stage,
         })
     }
@@ -241,6 +243,35 @@ impl Engine {
             return Err(format!("cannot start the generate: {e}"));
         }
         Ok(())
+    }
+
+    /// Pushes the live look to the configured Eos console and records it as preset `n`,
+    /// on its own thread (a console may be slow to connect); `/vo/eos/preset n lights` goes
+    /// to `peer` when it is sent, or `/vo/error` if it could not be.
+    pub fn eos_preset(&self, n: u32, peer: &Peer) -> Result<(), String> {
+        let to = self.eos.console()?.ok_or(
+            "no Eos console is configured: set [eos] address (and protocol) in the config",
+        )?;
+        let commands = crate::eos::preset_commands(&self.stage.scene, &self.session().live, n);
+        let lights = self.stage.scene.lights.len();
+        let (config, peer) = (self.eos.clone(), peer.clone());
+        std::thread::Builder::new()
+            .name("eos".into())
+            .spawn(move || {
+                let reply = match crate::eos::push(&config, to, &commands) {
+                    Ok(()) => msg(
+                        "/vo/eos/preset",
+                        vec![OscType::Int(n as i32), OscType::Int(lights as i32)],
+                    ),
+                    Err(e) => {
+                        tracing::warn!("/vo/eos/preset {n}: {e}");
+                        error("/vo/eos/preset", &e)
+                    }
+                };
+                peer.reply(&[reply]);
+            })
+            .map(drop)
+            .map_err(|e| format!("cannot start the Eos export: {e}"))
     }
 
     /// Whether a generate is running.

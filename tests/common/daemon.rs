@@ -1043,6 +1043,11 @@ pub struct Daemon {
 impl Daemon {
     /// Builds the stage in a fresh folder named after the test and starts the daemon.
     pub fn start(name: &str) -> Daemon {
+        Daemon::start_with(name, "")
+    }
+
+    /// As [`Daemon::start`], with `extra` TOML appended to the config (new sections).
+    pub fn start_with(name: &str, extra: &str) -> Daemon {
         let dir = temp_dir(&format!("daemon-{name}"));
         build_stage(&dir);
         let wire = Wire::start();
@@ -1061,7 +1066,8 @@ impl Daemon {
         for _ in 0..3 {
             // Another test may take the port between the probe and the daemon's bind.
             d.port = free_port();
-            std::fs::write(&d.config, config_text(d.port, &d.wire)).expect("write config");
+            let text = config_text(d.port, &d.wire) + extra;
+            std::fs::write(&d.config, text).expect("write config");
             d.osc = udp_client(d.port, &d.log);
             match d.spawn() {
                 Ok(()) => return d,
