@@ -21,3 +21,4 @@ pub mod stage;
 pub mod state;
 pub mod synth;
 pub mod targeting;
+pub mod touchosc;
