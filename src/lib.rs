@@ -9,6 +9,7 @@ pub mod dmx;
 pub mod engine;
 pub mod eos;
 pub mod gallery;
+pub mod http;
 pub mod look;
 pub mod objective;
 pub mod osc;
