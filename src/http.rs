@@ -487,24 +487,26 @@ async fn pick(shared: &Shared, from: SocketAddr, k: i32) -> Answer {
     else {
         return Answer::text(500, "the pick failed");
     };
-    let text = |m: &OscMessage| {
-        let args: Vec<String> = m
-            .args
+    // Replies as words: "/vo/picked 2 1"; an error's sentence alone.
+    let words = |m: &OscMessage| -> Vec<String> {
+        m.args
             .iter()
             .map(|a| match a {
                 OscType::String(s) => s.clone(),
                 OscType::Int(i) => i.to_string(),
                 other => format!("{other:?}"),
             })
-            .collect();
-        format!("{} {}", m.addr, args.join(" "))
+            .collect()
     };
     match replies.first() {
-        Some(m) if m.addr == "/vo/error" => Answer::json(
-            409,
-            json!({ "error": m.args.get(1).map(|a| match a { OscType::String(s) => s.clone(), _ => String::new() }) }),
+        Some(m) if m.addr == "/vo/error" => {
+            let sentence = words(m).get(1).cloned().unwrap_or_default();
+            Answer::json(409, json!({ "error": sentence }))
+        }
+        Some(m) => Answer::json(
+            200,
+            json!({ "reply": format!("{} {}", m.addr, words(m).join(" ")) }),
         ),
-        Some(m) => Answer::json(200, json!({ "reply": text(m) })),
         None => Answer::json(500, json!({ "error": "no reply" })),
     }
 }
