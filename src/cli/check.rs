@@ -120,7 +120,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     line(
         "eos",
         match config.eos.console() {
-            Ok(Some(addr)) => format!("presets to {addr} over {:?}", config.eos.protocol),
+            Ok(Some(addr)) => format!(
+                "presets to {addr} over {}",
+                match config.eos.protocol {
+                    crate::eos::Protocol::Udp => "udp",
+                    crate::eos::Protocol::Tcp => "tcp (OSC 1.0)",
+                    crate::eos::Protocol::TcpSlip => "tcp-slip (OSC 1.1)",
+                }
+            ),
             _ => "off".to_string(),
         },
     );
