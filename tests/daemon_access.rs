@@ -48,7 +48,7 @@ fn tcp_refused(d: &Daemon, ip: IpAddr) -> bool {
 
 #[test]
 fn senders_outside_the_allow_list_get_nothing_and_change_nothing() {
-    let mut d = Daemon::start_with(
+    let mut d = Daemon::start_setup(
         "access-v4",
         Setup {
             allow: vec!["127.0.0.2/32".into(), "::1".into()],
@@ -105,13 +105,13 @@ fn ipv6_addresses_and_blocks_are_checked_too() {
         client: SECOND,
         ..Setup::default()
     };
-    let d = Daemon::start_with("access-v6-in", setup(&["127.0.0.2", "::1/128"]));
+    let d = Daemon::start_setup("access-v6-in", setup(&["127.0.0.2", "::1/128"]));
     let mut t = d.tcp_from(V6, Framing::LengthPrefix);
     let r = t.ok("/vo/ping", vec![string("v6")], "/vo/pong");
     assert_eq!(r.args, [string("v6")]);
     drop(d);
 
-    let mut d = Daemon::start_with("access-v6-out", setup(&["127.0.0.2", "fd00::/8"]));
+    let mut d = Daemon::start_setup("access-v6-out", setup(&["127.0.0.2", "fd00::/8"]));
     assert!(tcp_refused(&d, V6), "TCP from ::1 outside fd00::/8");
     assert!(d.fence().is_empty());
     let lines = refusal_lines(&d);

@@ -5,6 +5,7 @@ mod gallery;
 mod render;
 mod run;
 mod send;
+mod touchosc;
 
 use clap::{ArgMatches, CommandFactory, FromArgMatches, Parser, Subcommand};
 
@@ -37,6 +38,8 @@ enum Command {
     },
     /// A small OSC client: sends one message, prints the replies that arrive within --wait.
     Send(send::Args),
+    /// Writes the TouchOSC layout for the booth tablet (regenerate it when addresses change).
+    Touchosc(touchosc::Args),
 }
 
 /// Runs the command line; returns the process exit code. User mistakes print one line on
@@ -69,6 +72,7 @@ pub fn main() -> std::process::ExitCode {
             })
             .map_err(anyhow::Error::from),
         Command::Send(args) => send::run(args),
+        Command::Touchosc(args) => touchosc::run(args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

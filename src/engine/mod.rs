@@ -11,7 +11,7 @@ pub mod session;
 
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
 use std::time::{Duration, Instant};
 
@@ -73,10 +73,16 @@ pub struct Engine {
     session: Mutex<Session>,
     generating: AtomicBool,
     loads: Mutex<Loads>,
+    /// Generates started in this run (the gallery serial of the next one, minus one).
+    generates: AtomicU64,
+    /// How many `/vo/entry/<k>/lit` were last pushed, so a smaller gallery turns the
+    /// buttons past its end off.
+    lit_span: AtomicUsize,
     files: Files,
     writer: Writer,
     subscribers: Mutex<Vec<Subscriber>>,
     push: OnceLock<Sender>,
+    eos: crate::eos::EosConfig,
 }
 
 impl Engine {
@@ -103,10 +109,13 @@ impl Engine {
             session: Mutex::new(session),
             generating: AtomicBool::new(false),
             loads: Mutex::default(),
+            generates: AtomicU64::new(0),
+            lit_span: AtomicUsize::new(0),
             writer: Writer::start(files.clone())?,
             files,
             subscribers: Mutex::new(Vec::new()),
             push: OnceLock::new(),
+            eos: config.eos.clone(),
             stage,
         })
     }
@@ -165,6 +174,11 @@ impl Engine {
         if let Some(out) = out {
             out.shutdown();
         }
+    }
+
+    /// The references folder (objective images are read from it, and only from it).
+    pub fn references(&self) -> &Path {
+        &self.references
     }
 
     /// Reads and analyses a reference image from the references folder, refusing paths
@@ -266,9 +280,9 @@ impl Engine {
         let st = objective.analysis.stats;
         let aspects = objective.aspects;
         s.objectives.push(session::Entry { id, objective });
-        let status = self.status(&s);
+        let feedback = self.feedback(&s);
         self.persist(s, true);
-        self.notify(&[status]);
+        self.notify(&feedback);
         msg(
             "/vo/objective/added",
             vec![
@@ -302,13 +316,16 @@ impl Engine {
         } else {
             s.seed
         };
+        let serial = self.generates.fetch_add(1, Ordering::SeqCst) + 1;
+        let mut started_msgs = vec![msg("/vo/progress", vec![OscType::Float(0.0)])];
+        started_msgs.extend(self.feedback(&s));
         drop(s);
         let engine = Arc::clone(self);
         let peer = peer.clone();
         let spawned = std::thread::Builder::new()
             .name("generate".into())
             .spawn(move || {
-                engine.notify(&[msg("/vo/progress", vec![OscType::Float(0.0)])]);
+                engine.notify(&started_msgs);
                 let started = Instant::now();
                 let generation = engine.stage.generate(
                     &GenerateRequest {
@@ -339,23 +356,56 @@ impl Engine {
                     ],
                 );
                 let mut s = engine.session();
-                s.gallery = Some(Gallery { generation, seed });
+                s.gallery = Some(Gallery {
+                    generation,
+                    seed,
+                    serial,
+                });
                 s.entry = None;
-                let status = engine.status(&s);
-                drop(s);
                 engine.generating.store(false, Ordering::SeqCst);
-                peer.reply(std::slice::from_ref(&reply));
-                engine.notify(&[
+                let mut pushes = vec![
                     msg("/vo/progress", vec![OscType::Float(1.0)]),
-                    reply,
-                    status,
-                ]);
+                    reply.clone(),
+                ];
+                pushes.extend(engine.feedback(&s));
+                drop(s);
+                peer.reply(std::slice::from_ref(&reply));
+                engine.notify(&pushes);
             });
         if let Err(e) = spawned {
             self.generating.store(false, Ordering::SeqCst);
             return Err(format!("cannot start the generate: {e}"));
         }
         Ok(())
+    }
+
+    /// Pushes the live look to the configured Eos console and records it as preset `n`,
+    /// on its own thread (a console may be slow to connect); `/vo/eos/preset n lights` goes
+    /// to `peer` when it is sent, or `/vo/error` if it could not be.
+    pub fn eos_preset(&self, n: u32, peer: &Peer) -> Result<(), String> {
+        let to = self.eos.console()?.ok_or(
+            "no Eos console is configured: set [eos] address (and protocol) in the config",
+        )?;
+        let commands = crate::eos::preset_commands(&self.stage.scene, &self.session().live, n);
+        let lights = self.stage.scene.lights.len();
+        let (config, peer) = (self.eos.clone(), peer.clone());
+        std::thread::Builder::new()
+            .name("eos".into())
+            .spawn(move || {
+                let reply = match crate::eos::push(&config, to, &commands) {
+                    Ok(()) => msg(
+                        "/vo/eos/preset",
+                        vec![OscType::Int(n as i32), OscType::Int(lights as i32)],
+                    ),
+                    Err(e) => {
+                        tracing::warn!("/vo/eos/preset {n}: {e}");
+                        error("/vo/eos/preset", &e)
+                    }
+                };
+                peer.reply(&[reply]);
+            })
+            .map(drop)
+            .map_err(|e| format!("cannot start the Eos export: {e}"))
     }
 
     /// Whether a generate is running.
@@ -383,6 +433,56 @@ impl Engine {
                 OscType::Float(s.master),
             ],
         )
+    }
+
+    /// What a tablet shows of `s`, pushed to subscribers on every change so buttons and
+    /// labels follow without scripts: `/vo/status`, the one-line `/vo/status/text`, the
+    /// gallery sizes, and `/vo/entry/<k>/lit 0|1` for every entry (and for entries of a
+    /// larger earlier gallery, turned off).
+    pub fn feedback(&self, s: &Session) -> Vec<OscMessage> {
+        let entries = s.gallery.as_ref().map_or(0, Gallery::len);
+        let span = entries.max(self.lit_span.swap(entries, Ordering::SeqCst));
+        let live = s.entry.map_or(0, |(k, _)| k);
+        let mut out = vec![
+            self.status(s),
+            msg(
+                "/vo/status/text",
+                vec![OscType::String(self.status_text(s))],
+            ),
+            crate::cmd::gallery_sizes(s),
+        ];
+        out.extend((1..=span).map(|k| {
+            msg(
+                &format!("/vo/entry/{k}/lit"),
+                vec![OscType::Int(i32::from(k == live))],
+            )
+        }));
+        out
+    }
+
+    /// One line a person reads on a tablet or the web page: what is live, how big the
+    /// gallery is, what is running.
+    pub fn status_text(&self, s: &Session) -> String {
+        let mut parts = Vec::new();
+        if s.blackout {
+            parts.push("BLACKOUT".to_string());
+        }
+        if self.is_generating() {
+            parts.push("generating...".to_string());
+        }
+        parts.push(match (&s.gallery, s.entry) {
+            (None, _) => "no gallery yet".to_string(),
+            (Some(g), Some((k, 1))) => format!("entry {k} of {} live", g.len()),
+            (Some(g), Some((k, m))) => format!("entry {k}.{m} of {} live", g.len()),
+            (Some(g), None) => format!("{} entries", g.len()),
+        });
+        let n = s.objectives.len();
+        parts.push(format!("{n} objective{}", if n == 1 { "" } else { "s" }));
+        parts.push(format!("fade {} s", s.fade_s));
+        if s.master < 1.0 {
+            parts.push(format!("master {:.0}%", s.master * 100.0));
+        }
+        parts.join(", ")
     }
 
     /// Adds or renews a subscription from `peer`, pushing to its address at `port`.

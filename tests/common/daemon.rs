@@ -1039,6 +1039,8 @@ pub struct Setup {
     pub allow: Vec<String>,
     /// Where the harness's own clients send from: it must be allowed.
     pub client: IpAddr,
+    /// TOML appended to the config (new sections).
+    pub extra: String,
 }
 
 pub const LOCALHOST: IpAddr = IpAddr::V4(Ipv4Addr::LOCALHOST);
@@ -1050,6 +1052,7 @@ impl Default for Setup {
             tcp: LOCALHOST,
             allow: Vec::new(),
             client: LOCALHOST,
+            extra: String::new(),
         }
     }
 }
@@ -1071,11 +1074,22 @@ pub struct Daemon {
 impl Daemon {
     /// Builds the stage in a fresh folder named after the test and starts the daemon.
     pub fn start(name: &str) -> Daemon {
-        Daemon::start_with(name, Setup::default())
+        Daemon::start_setup(name, Setup::default())
     }
 
-    /// [`Daemon::start`] with other listen addresses and allow-list.
-    pub fn start_with(name: &str, setup: Setup) -> Daemon {
+    /// As [`Daemon::start`], with `extra` TOML appended to the config (new sections).
+    pub fn start_with(name: &str, extra: &str) -> Daemon {
+        Daemon::start_setup(
+            name,
+            Setup {
+                extra: extra.to_string(),
+                ..Setup::default()
+            },
+        )
+    }
+
+    /// [`Daemon::start`] with other listen addresses, allow-list or extra config.
+    pub fn start_setup(name: &str, setup: Setup) -> Daemon {
         let dir = temp_dir(&format!("daemon-{name}"));
         build_stage(&dir);
         let wire = Wire::start();
@@ -1095,8 +1109,8 @@ impl Daemon {
         for _ in 0..3 {
             // Another test may take the port between the probe and the daemon's bind.
             d.port = free_port(d.setup.udp, d.setup.tcp);
-            std::fs::write(&d.config, config_text(d.port, &d.setup, &d.wire))
-                .expect("write config");
+            let text = config_text(d.port, &d.setup, &d.wire) + &d.setup.extra;
+            std::fs::write(&d.config, text).expect("write config");
             d.osc = d.client_from(d.setup.client);
             match d.spawn() {
                 Ok(()) => return d,
@@ -1304,7 +1318,14 @@ pub fn connect_from(ip: IpAddr, to: SocketAddr) -> std::io::Result<TcpStream> {
 }
 
 fn config_text(port: u16, setup: &Setup, wire: &Wire) -> String {
-    let allow: Vec<String> = setup.allow.iter().map(|a| format!("{a:?}")).collect();
+    // Only when set: the default config stays as short as a person would write it (and a
+    // test may add its own allow line).
+    let allow = if setup.allow.is_empty() {
+        String::new()
+    } else {
+        let quoted: Vec<String> = setup.allow.iter().map(|a| format!("{a:?}")).collect();
+        format!("allow = [{}]\n", quoted.join(", "))
+    };
     format!(
         r#"scene = "scene"
 references = "refs"
@@ -1313,8 +1334,7 @@ state_dir = "state"
 [osc]
 udp = "{udp}"
 tcp = "{tcp}"
-allow = [{allow}]
-
+{allow}
 [output]
 rate_hz = {RATE_HZ}
 fade_s = 0.0
@@ -1338,7 +1358,6 @@ clusters = {CLUSTERS}
 "#,
         udp = SocketAddr::new(setup.udp, port),
         tcp = SocketAddr::new(setup.tcp, port),
-        allow = allow.join(", "),
         sacn = wire.sacn_port,
         artnet = wire.artnet_port,
     )
