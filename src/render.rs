@@ -26,9 +26,6 @@ const TASK_STRIPS: usize = 8;
 /// One light's strip of one channel.
 type Row = [f32; STRIP];
 
-/// A register block's result: `[channel][candidate][pixel]`.
-type Acc = [[[f32; STRIP]; MR]; 3];
-
 /// Linear gain of an exposure in stops.
 pub fn exposure_gain(stops: f32) -> f32 {
     stops.exp2()
@@ -86,15 +83,46 @@ impl Kernel {
     }
 
     /// Computes one register block: `acc[r][p] = sum over active l of w[l][r] * b[l][p]`.
-    fn block(self, w: &[[f32; MR]], b: &[Row], active: &[u32], acc: &mut [[f32; STRIP]; MR]) {
+    /// While it runs, the kernel asks for the cache lines of `ahead` (the next strip's
+    /// panel), one per light, so memory streams in under the arithmetic.
+    fn block(
+        self,
+        w: &[[f32; MR]],
+        b: &[Row],
+        active: &[u32],
+        acc: &mut [[f32; STRIP]; MR],
+        ahead: Ahead,
+    ) {
         match self {
             #[cfg(target_arch = "x86_64")]
             // SAFETY: `composite_with` only runs kernels whose `supported()` is true.
-            Kernel::Avx512 => unsafe { x86::block_avx512(w, b, active, acc) },
+            Kernel::Avx512 => unsafe { x86::block_avx512(w, b, active, acc, ahead) },
             #[cfg(target_arch = "x86_64")]
             // SAFETY: as above: AVX2 and FMA were detected.
-            Kernel::Avx2 => unsafe { x86::block_avx2(w, b, active, acc) },
+            Kernel::Avx2 => unsafe { x86::block_avx2(w, b, active, acc, ahead) },
             _ => block_portable(w, b, active, acc),
+        }
+    }
+}
+
+/// Cache lines to prefetch: `lines` lines from `start`. A prefetch is only a hint and never
+/// faults, so the address needs no validity guarantee.
+#[derive(Clone, Copy)]
+struct Ahead {
+    start: *const u8,
+    lines: usize,
+}
+
+impl Ahead {
+    /// Asks for line `i` if there is one.
+    #[inline(always)]
+    fn touch(self, i: usize) {
+        #[cfg(target_arch = "x86_64")]
+        if i < self.lines {
+            use std::arch::x86_64::{_MM_HINT_T1, _mm_prefetch};
+            // SAFETY: prefetching is a hint with no effect on memory safety; the address
+            // (computed with wrapping arithmetic) is inside the next strip's panel anyway.
+            unsafe { _mm_prefetch::<_MM_HINT_T1>(self.start.wrapping_add(64 * i).cast()) };
         }
     }
 }
@@ -119,7 +147,7 @@ mod x86 {
 
     use half::f16;
 
-    use super::{MR, Row, STRIP};
+    use super::{Ahead, MR, Row, STRIP};
 
     /// 4 candidates x 96 pixels in 24 zmm accumulators; per light 6 loads, 4 broadcasts,
     /// 24 FMAs.
@@ -129,10 +157,12 @@ mod x86 {
         b: &[Row],
         active: &[u32],
         acc: &mut [[f32; STRIP]; MR],
+        ahead: Ahead,
     ) {
         const V: usize = STRIP / 16;
         let mut c = [[_mm512_setzero_ps(); V]; MR];
-        for &l in active {
+        for (i, &l) in active.iter().enumerate() {
+            ahead.touch(i);
             let (row, ws) = (&b[l as usize], &w[l as usize]);
             let mut v = [_mm512_setzero_ps(); V];
             for (j, v) in v.iter_mut().enumerate() {
@@ -161,12 +191,15 @@ mod x86 {
         b: &[Row],
         active: &[u32],
         acc: &mut [[f32; STRIP]; MR],
+        ahead: Ahead,
     ) {
         const V: usize = 3;
-        for part in 0..STRIP / (8 * V) {
+        const PARTS: usize = STRIP / (8 * V);
+        for part in 0..PARTS {
             let off = part * 8 * V;
             let mut c = [[_mm256_setzero_ps(); V]; MR];
-            for &l in active {
+            for (i, &l) in active.iter().enumerate() {
+                ahead.touch(i * PARTS + part);
                 let (row, ws) = (&b[l as usize][off..off + 8 * V], &w[l as usize]);
                 let mut v = [_mm256_setzero_ps(); V];
                 for (j, v) in v.iter_mut().enumerate() {
@@ -338,59 +371,60 @@ pub fn composite_with<O: Send>(
             tasks[t].push(chunk);
         }
     }
-    tasks.into_par_iter().enumerate().for_each_init(
-        || {
-            (
-                vec![[0.0f32; STRIP]; 3 * lights],
-                Box::new([[[0.0f32; STRIP]; MR]; 3]),
-            )
-        },
-        |(panel, acc), (t, mut outs)| {
+    tasks.into_par_iter().enumerate().for_each(|(t, mut outs)| {
+        PANEL.with_borrow_mut(|panel| {
+            panel.resize(3 * lights, [0.0; STRIP]);
+            let acc = &mut [[[0.0f32; STRIP]; MR]; 3];
             for s in 0..task_strips {
                 let start = t * task_px + s * STRIP;
                 if start >= pixels {
                     break;
                 }
                 let len = (pixels - start).min(STRIP);
-                let rows: &[Row] = match basis.panel(start / STRIP) {
+                let strip = start / STRIP;
+                let rows: &[Row] = match basis.panel(strip) {
                     Panel::Single(p) => p.as_chunks().0,
                     Panel::Half(p) => {
                         widen(kernel, p, panel);
                         panel
                     }
                 };
+                // The next strip's panel, shared out over this strip's kernel calls.
+                let next = match (strip + 1 < basis.strips()).then(|| basis.panel(strip + 1)) {
+                    Some(Panel::Single(p)) => (p.as_ptr().cast::<u8>(), size_of_val(p)),
+                    Some(Panel::Half(p)) => (p.as_ptr().cast::<u8>(), size_of_val(p)),
+                    None => (std::ptr::null(), 0),
+                };
+                let per_call = next.1.div_ceil(64).div_ceil(3 * blocks);
                 let local = s * STRIP * 3..(s * STRIP + len) * 3;
                 for blk in 0..blocks {
-                    compute(kernel, &packed, &active, blocks, blk, rows, lights, acc);
+                    for (ch, acc) in acc.iter_mut().enumerate() {
+                        let i = ch * blocks + blk;
+                        let call = blk * 3 + ch;
+                        let ahead = Ahead {
+                            start: next.0.wrapping_add(call * per_call * 64),
+                            lines: per_call
+                                .min(next.1.div_ceil(64).saturating_sub(call * per_call)),
+                        };
+                        let b = &rows[ch * lights..(ch + 1) * lights];
+                        kernel.block(&packed[i], b, &active[i], acc, ahead);
+                    }
                     for r in 0..MR.min(cands - blk * MR) {
                         let rgb = [&acc[0][r][..len], &acc[1][r][..len], &acc[2][r][..len]];
                         emit(rgb, &mut outs[blk * MR + r][local.clone()]);
                     }
                 }
             }
-            #[cfg(target_arch = "x86_64")]
-            x86::store_fence();
-        },
-    );
+        });
+        #[cfg(target_arch = "x86_64")]
+        x86::store_fence();
+    });
 }
 
-/// Runs the kernel on all three channels of block `blk`.
-#[allow(clippy::too_many_arguments)]
-fn compute(
-    kernel: Kernel,
-    packed: &[Vec<[f32; MR]>],
-    active: &[Vec<u32>],
-    blocks: usize,
-    blk: usize,
-    panel: &[Row],
-    lights: usize,
-    acc: &mut Acc,
-) {
-    for (ch, acc) in acc.iter_mut().enumerate() {
-        let i = ch * blocks + blk;
-        let b = &panel[ch * lights..(ch + 1) * lights];
-        kernel.block(&packed[i], b, &active[i], acc);
-    }
+thread_local! {
+    /// Each thread's half-to-single conversion buffer for one strip's panel, kept between
+    /// renders (a few hundred KB; allocating and zeroing it per task showed in profiles).
+    static PANEL: std::cell::RefCell<Vec<Row>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
 /// Renders looks to 8-bit sRGB images.
