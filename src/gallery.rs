@@ -10,7 +10,7 @@ use rayon::prelude::*;
 use crate::basis::BasisImages;
 use crate::color::linear_to_lab_planar;
 use crate::look::Look;
-use crate::render::{Kernel, STRIP, composite_with, weights};
+use crate::render::{Kernel, STRIP, composite_with, weights, zeroed_outputs};
 use crate::sampler::Plan;
 
 /// Width of the proxy renders distances are measured on.
@@ -201,10 +201,7 @@ fn mean_delta_e_lanes(a: &[f32], b: &[f32]) -> f32 {
 /// layout is the compositor's: per strip of [`STRIP`] pixels, the strip's L, a and b planes.
 pub fn lab_proxies(proxy: &BasisImages, looks: &[&Look], gain: f32) -> Vec<Vec<f32>> {
     let w = weights(looks, gain);
-    let mut outs: Vec<Vec<f32>> = looks
-        .iter()
-        .map(|_| vec![0.0; proxy.pixels() * 3])
-        .collect();
+    let mut outs = zeroed_outputs(looks.len(), proxy.pixels() * 3);
     composite_with(Kernel::detect(), proxy, &w, &mut outs, linear_to_lab_planar);
     outs
 }

@@ -418,6 +418,10 @@ pub fn composite_with<O: Send>(
         });
         #[cfg(target_arch = "x86_64")]
         x86::store_fence();
+        // A task is at most a millisecond or so: offering the CPU between tasks lets a
+        // thread that just woke (the DMX clock) run now rather than when the scheduler's
+        // slice ends, which measurably cuts late frames during generates (~1 us per task).
+        std::thread::yield_now();
     });
 }
 
@@ -427,10 +431,19 @@ thread_local! {
     static PANEL: std::cell::RefCell<Vec<Row>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
+/// `n` zeroed output buffers of `len`, zeroed on all threads (the allocator usually hands
+/// back recycled memory, so zeroing is a real memset that showed up in profiles).
+pub fn zeroed_outputs<O: Default + Clone + Send>(n: usize, len: usize) -> Vec<Vec<O>> {
+    (0..n)
+        .into_par_iter()
+        .map(|_| vec![O::default(); len])
+        .collect()
+}
+
 /// Renders looks to 8-bit sRGB images.
 pub fn render_srgb8(basis: &BasisImages, looks: &[&Look], gain: f32) -> Vec<image::RgbImage> {
     let w = weights(looks, gain);
-    let mut outs: Vec<Vec<u8>> = looks.iter().map(|_| vec![0; basis.pixels() * 3]).collect();
+    let mut outs = zeroed_outputs(looks.len(), basis.pixels() * 3);
     composite_with(Kernel::detect(), basis, &w, &mut outs, encode_srgb8_planar);
     outs.into_iter()
         .map(|buf| {
