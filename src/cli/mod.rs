@@ -1,5 +1,6 @@
 //! The command line (cli.md): argument parsing and one module per subcommand.
 
+mod bench;
 mod check;
 mod gallery;
 mod render;
@@ -37,6 +38,8 @@ enum Command {
     },
     /// A small OSC client: sends one message, prints the replies that arrive within --wait.
     Send(send::Args),
+    /// Measures the FLOP bound and the performance targets on this machine.
+    Bench(bench::Args),
 }
 
 /// Runs the command line; returns the process exit code. User mistakes print one line on
@@ -69,6 +72,7 @@ pub fn main() -> std::process::ExitCode {
             })
             .map_err(anyhow::Error::from),
         Command::Send(args) => send::run(args),
+        Command::Bench(args) => bench::run(args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
