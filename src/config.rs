@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
+use crate::eos::EosConfig;
 use crate::output::OutputConfig;
 use crate::scene::describe_toml_error;
 
@@ -26,6 +27,8 @@ pub struct Config {
     pub output: OutputConfig,
     /// Generation defaults.
     pub generate: GenerateConfig,
+    /// The Eos console presets are exported to (none by default).
+    pub eos: EosConfig,
 }
 
 #[derive(Deserialize)]
@@ -37,6 +40,7 @@ struct ConfigFile {
     osc: OscConfig,
     output: OutputConfig,
     generate: GenerateConfig,
+    eos: EosConfig,
 }
 
 impl Default for ConfigFile {
@@ -48,6 +52,7 @@ impl Default for ConfigFile {
             osc: OscConfig::default(),
             output: OutputConfig::default(),
             generate: GenerateConfig::default(),
+            eos: EosConfig::default(),
         }
     }
 }
@@ -219,6 +224,7 @@ impl Config {
         if let Some((_, m)) = checks.iter().find(|(ok, _)| !ok) {
             return Err(at((*m).to_string()));
         }
+        file.eos.console().map_err(at)?;
         Ok(Config {
             path: path.to_path_buf(),
             scene: resolve(&file.scene),
@@ -227,6 +233,7 @@ impl Config {
             osc: file.osc,
             output: file.output,
             generate: file.generate,
+            eos: file.eos,
         })
     }
 

@@ -7,6 +7,7 @@ pub mod color;
 pub mod config;
 pub mod dmx;
 pub mod engine;
+pub mod eos;
 pub mod gallery;
 pub mod look;
 pub mod objective;

@@ -7,6 +7,7 @@
 use std::path::Path;
 
 use rand::{Rng, RngExt, SeedableRng};
+use serde::{Deserialize, Serialize};
 
 use crate::color::{delta_e, linear_to_lab, linear_to_srgb, srgb8_to_linear_table};
 
@@ -382,4 +383,83 @@ pub fn nearest(centres: &[[f32; 3]], lab: [f32; 3]) -> usize {
         }
     }
     best.0
+}
+
+/// An objective as files record it (the gallery's JSON, the daemon's session file): its
+/// analysis is kept, so it stands on its own without the image.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ObjectiveRecord {
+    /// The reference's file name.
+    pub image: String,
+    /// `intensity`, `color` or `both`.
+    pub aspects: String,
+    /// x0, y0, x1, y1.
+    pub region: [f32; 4],
+    /// Mean L*.
+    pub mean_l: f32,
+    /// Key L*.
+    pub key_l: f32,
+    /// Fraction of pixels above the mean.
+    pub bright: f32,
+    /// Palette, heaviest first.
+    pub palette: Vec<PaletteRecord>,
+}
+
+/// One palette colour as files record it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PaletteRecord {
+    /// sRGB 0..1.
+    pub color: [f32; 3],
+    /// Share of pixels.
+    pub weight: f32,
+}
+
+impl From<&Objective> for ObjectiveRecord {
+    fn from(o: &Objective) -> ObjectiveRecord {
+        let st = o.analysis.stats;
+        ObjectiveRecord {
+            image: o.image.clone(),
+            aspects: o.aspects.name().to_string(),
+            region: [o.region.x0, o.region.y0, o.region.x1, o.region.y1],
+            mean_l: st.mean_l,
+            key_l: st.key_l,
+            bright: st.bright,
+            palette: o
+                .analysis
+                .palette
+                .iter()
+                .map(|p| PaletteRecord {
+                    color: p.color,
+                    weight: p.weight,
+                })
+                .collect(),
+        }
+    }
+}
+
+impl ObjectiveRecord {
+    /// The objective again; None if the record was edited into something invalid.
+    pub fn to_objective(&self) -> Option<Objective> {
+        let [x0, y0, x1, y1] = self.region;
+        Some(Objective {
+            image: self.image.clone(),
+            aspects: Aspects::parse(&self.aspects).ok()?,
+            region: Region::new(x0, y0, x1, y1).ok()?,
+            analysis: Analysis {
+                stats: IntensityStats {
+                    mean_l: self.mean_l,
+                    key_l: self.key_l,
+                    bright: self.bright,
+                },
+                palette: self
+                    .palette
+                    .iter()
+                    .map(|p| PaletteColor {
+                        color: p.color,
+                        weight: p.weight,
+                    })
+                    .collect(),
+            },
+        })
+    }
 }

@@ -42,6 +42,28 @@ fn reference(dir: &Path) -> std::path::PathBuf {
     p
 }
 
+/// Renders `look_json` on `scene` through the binary and returns the image.
+fn render(dir: &Path, scene: &Path, look_json: &str) -> image::RgbImage {
+    let look = dir.join("look.json");
+    std::fs::write(&look, look_json).unwrap();
+    let png = dir.join("out.png");
+    let out = run(&[
+        "render",
+        "--scene",
+        s(scene),
+        "--look",
+        s(&look),
+        "--out",
+        s(&png),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    image::open(&png).unwrap().to_rgb8()
+}
+
 #[test]
 fn gallery_writes_a_numbered_contact_sheet_and_every_candidate() {
     let dir = temp_dir("cli-gallery");
@@ -168,34 +190,19 @@ fn gallery_takes_several_references_each_with_its_region() {
 fn render_draws_a_look_file() {
     let dir = temp_dir("cli-render");
     let scene = stripes(&dir.join("scene"), 4, false);
-    let look = dir.join("look.json");
-    std::fs::write(
-        &look,
+    let img = render(
+        &dir,
+        &scene,
         r#"{"label": "test", "lights": [{"channel": 2, "intensity": 0.5, "color": [1.0, 0.0, 0.0]}]}"#,
-    )
-    .unwrap();
-    let png = dir.join("out.png");
-    let out = run(&[
-        "render",
-        "--scene",
-        s(&scene),
-        "--look",
-        s(&look),
-        "--out",
-        s(&png),
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
     );
-    let img = image::open(&png).unwrap().to_rgb8();
     assert_eq!(img.dimensions(), (16, 10));
     // Light 2 lights columns 4..8 at 0.5 of white; at half intensity, red: linear 0.25.
     let want = visobjd::color::encode_srgb8(0.25);
     assert_eq!(img.get_pixel(5, 3).0, [want, 0, 0]);
     assert_eq!(img.get_pixel(0, 3).0, [0, 0, 0]);
 
+    let look = dir.join("bad.json");
+    let png = dir.join("bad.png");
     std::fs::write(&look, r#"{"lights": [{"channel": 99, "intensity": 0.5}]}"#).unwrap();
     fails_with(
         &run(&[
@@ -384,24 +391,11 @@ fn basis_images_may_be_half_or_float_rgb_or_rgba_scanline_or_tiled() {
         .write()
         .to_file(scene.join("basis/002.exr"))
         .unwrap();
-    let look = dir.join("look.json");
-    std::fs::write(&look, r#"{"lights": [{"channel": 2, "intensity": 1.0}]}"#).unwrap();
-    let png = dir.join("out.png");
-    let out = run(&[
-        "render",
-        "--scene",
-        s(&scene),
-        "--look",
-        s(&look),
-        "--out",
-        s(&png),
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let img = render(
+        &dir,
+        &scene,
+        r#"{"lights": [{"channel": 2, "intensity": 1.0}]}"#,
     );
-    let img = image::open(&png).unwrap().to_rgb8();
     let want = visobjd::color::encode_srgb8(0.5);
     assert_eq!(img.get_pixel(5, 3).0, [want; 3]);
     assert_eq!(img.get_pixel(9, 3).0, [0; 3]);

@@ -1,6 +1,6 @@
 //! The DMX output on real sockets (127.0.0.1 only; multicast only inside a private network
-//! namespace). Packets are decoded here from the specifications' byte offsets, independently
-//! of the sending code.
+//! namespace). Packets are decoded by `common::wire` from the specifications' byte offsets,
+//! independently of the sending code.
 
 use std::collections::BTreeMap;
 use std::net::{Ipv4Addr, UdpSocket};
@@ -13,117 +13,9 @@ use visobjd::look::{Level, Look};
 use visobjd::output::{ArtnetDest, Output, OutputConfig, SacnDest};
 use visobjd::scene::Scene;
 
-// ---- E1.31-2018 data packet (Table 4-1) -------------------------------------------------
+mod common;
 
-const ACN_ID: &[u8; 12] = b"ASC-E1.17\0\0\0";
-
-#[derive(Debug, Clone)]
-struct Sacn {
-    cid: [u8; 16],
-    source_name: String,
-    priority: u8,
-    sync_universe: u16,
-    sequence: u8,
-    terminated: bool,
-    universe: u16,
-    dmx: Vec<u8>,
-}
-
-/// Decodes an E1.31 data packet; `None` for anything else (e.g. a sync packet).
-fn parse_sacn(p: &[u8]) -> Option<Sacn> {
-    if p.len() < 126 || p[18..22] != [0, 0, 0, 4] {
-        return None;
-    }
-    assert_eq!(p[0..2], [0x00, 0x10], "preamble size");
-    assert_eq!(p[2..4], [0, 0], "postamble size");
-    assert_eq!(&p[4..16], ACN_ID, "ACN packet identifier");
-    let flags_len = |at: usize| u16::from_be_bytes([p[at], p[at + 1]]);
-    assert_eq!(
-        flags_len(16),
-        0x7000 | (p.len() - 16) as u16,
-        "root flags+length"
-    );
-    assert_eq!(
-        flags_len(38),
-        0x7000 | (p.len() - 38) as u16,
-        "framing flags+length"
-    );
-    assert_eq!(
-        p[40..44],
-        [0, 0, 0, 2],
-        "framing vector VECTOR_E131_DATA_PACKET"
-    );
-    assert_eq!(
-        flags_len(115),
-        0x7000 | (p.len() - 115) as u16,
-        "DMP flags+length"
-    );
-    assert_eq!(p[117], 0x02, "DMP vector VECTOR_DMP_SET_PROPERTY");
-    assert_eq!(p[118], 0xa1, "address type and data type");
-    assert_eq!(p[119..121], [0, 0], "first property address");
-    assert_eq!(p[121..123], [0, 1], "address increment");
-    let count = u16::from_be_bytes([p[123], p[124]]) as usize;
-    assert_eq!(count, 513, "property value count");
-    assert_eq!(p.len(), 125 + count);
-    assert_eq!(p[125], 0, "start code");
-    let name = &p[44..108];
-    let end = name
-        .iter()
-        .position(|&b| b == 0)
-        .expect("NUL-terminated name");
-    Some(Sacn {
-        cid: p[22..38].try_into().expect("16 bytes"),
-        source_name: String::from_utf8(name[..end].to_vec()).expect("UTF-8 name"),
-        priority: p[108],
-        sync_universe: u16::from_be_bytes([p[109], p[110]]),
-        sequence: p[111],
-        terminated: p[112] & 0x40 != 0,
-        universe: u16::from_be_bytes([p[113], p[114]]),
-        dmx: p[126..].to_vec(),
-    })
-}
-
-/// Decodes an E1.31 synchronization packet (Table 4-2) to its sync address.
-fn parse_sync(p: &[u8]) -> Option<u16> {
-    if p.len() < 22 || p[18..22] != [0, 0, 0, 8] {
-        return None;
-    }
-    assert_eq!(p.len(), 49, "a sync packet is 49 bytes");
-    assert_eq!(p[0..2], [0x00, 0x10], "preamble size");
-    assert_eq!(&p[4..16], ACN_ID, "ACN packet identifier");
-    assert_eq!(p[16..18], [0x70, 33], "root flags+length");
-    assert_eq!(p[38..40], [0x70, 11], "framing flags+length");
-    assert_eq!(
-        p[40..44],
-        [0, 0, 0, 1],
-        "VECTOR_E131_EXTENDED_SYNCHRONIZATION"
-    );
-    assert_eq!(p[47..49], [0, 0], "reserved");
-    Some(u16::from_be_bytes([p[45], p[46]]))
-}
-
-// ---- Art-Net 4 ArtDmx ---------------------------------------------------------------------
-
-#[derive(Debug, Clone)]
-struct ArtDmx {
-    sequence: u8,
-    port_address: u16,
-    dmx: Vec<u8>,
-}
-
-fn parse_artnet(p: &[u8]) -> ArtDmx {
-    assert_eq!(&p[0..8], b"Art-Net\0");
-    assert_eq!(u16::from_le_bytes([p[8], p[9]]), 0x5000, "OpDmx");
-    assert_eq!(u16::from_be_bytes([p[10], p[11]]), 14, "protocol version");
-    let length = u16::from_be_bytes([p[16], p[17]]) as usize;
-    assert_eq!(length, 512);
-    assert_eq!(p.len(), 18 + length);
-    ArtDmx {
-        sequence: p[12],
-        port_address: u16::from_le_bytes([p[14], p[15]]),
-        dmx: p[18..].to_vec(),
-    }
-}
+use common::wire::{ArtDmx, Sacn, parse_artnet, parse_sacn, parse_sync};
 
 // ---- fixtures --------------------------------------------------------------------------
 

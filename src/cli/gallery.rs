@@ -9,7 +9,7 @@ use serde::Serialize;
 
 use crate::gallery::Generation;
 use crate::look::{LightEntry, LookFile, entries};
-use crate::objective::{Aspects, Objective, Region, analyze, decode_reference};
+use crate::objective::{Aspects, Objective, ObjectiveRecord, Region, analyze, decode_reference};
 use crate::sampler::{Constraints, Spread};
 use crate::sheet::contact_sheet;
 use crate::stage::{GenerateRequest, Stage, THUMB_WIDTH};
@@ -205,26 +205,9 @@ struct Report {
     seed: u64,
     threshold: f32,
     draws: usize,
-    objectives: Vec<ObjectiveReport>,
+    objectives: Vec<ObjectiveRecord>,
     entries: Vec<EntryReport>,
     candidates: Vec<CandidateReport>,
-}
-
-#[derive(Serialize)]
-struct ObjectiveReport {
-    image: String,
-    aspects: &'static str,
-    region: [f32; 4],
-    mean_l: f32,
-    key_l: f32,
-    bright: f32,
-    palette: Vec<PaletteReport>,
-}
-
-#[derive(Serialize)]
-struct PaletteReport {
-    color: [f32; 3],
-    weight: f32,
 }
 
 #[derive(Serialize)]
@@ -253,26 +236,7 @@ fn report(stage: &Stage, objectives: &[Objective], g: &Generation, seed: u64) ->
         seed,
         threshold: g.threshold,
         draws: g.draws,
-        objectives: objectives
-            .iter()
-            .map(|o| ObjectiveReport {
-                image: o.image.clone(),
-                aspects: o.aspects.name(),
-                region: [o.region.x0, o.region.y0, o.region.x1, o.region.y1],
-                mean_l: o.analysis.stats.mean_l,
-                key_l: o.analysis.stats.key_l,
-                bright: o.analysis.stats.bright,
-                palette: o
-                    .analysis
-                    .palette
-                    .iter()
-                    .map(|p| PaletteReport {
-                        color: p.color,
-                        weight: p.weight,
-                    })
-                    .collect(),
-            })
-            .collect(),
+        objectives: objectives.iter().map(ObjectiveRecord::from).collect(),
         entries: g
             .entries
             .iter()

@@ -42,26 +42,33 @@ impl Cmd {
             Cmd::Status => Ok(vec![e.status(&e.session())]),
             Cmd::Subscribe(port) => {
                 let to = e.subscribe(peer, port);
+                // The whole state goes where the pushes will go, so a tablet that
+                // listens on another port than it sends from is complete at once.
                 let s = e.session();
-                let mut out = vec![
-                    msg("/vo/subscribed", vec![int(to.port().into())]),
-                    e.status(&s),
-                ];
+                let mut state = vec![e.status(&s)];
                 if let Some((k, m)) = s.entry {
-                    out.push(msg("/vo/picked", vec![int(k), int(m)]));
+                    state.push(msg("/vo/picked", vec![int(k), int(m)]));
                 }
-                out.push(super::gallery::sizes(&s));
-                out.extend(super::objective::list(&s));
-                out.extend(super::looks::list(&s));
-                Ok(out)
+                state.push(super::gallery::sizes(&s));
+                state.extend(super::objective::list(&s));
+                state.extend(super::looks::list(&s));
+                drop(s);
+                let subscribed = msg("/vo/subscribed", vec![int(to.port().into())]);
+                if let Err(err) = e.push_to(to, &state) {
+                    e.unsubscribe(peer);
+                    return Err(format!("cannot reach {to} to subscribe it: {err}"));
+                }
+                Ok(vec![subscribed])
             }
             Cmd::Unsubscribe => {
                 e.unsubscribe(peer);
                 Ok(vec![msg("/vo/unsubscribed", Vec::new())])
             }
-            Cmd::EosPreset(n) => Err(format!(
-                "cannot record preset {n}: no Eos console is configured for this daemon"
-            )),
+            Cmd::EosPreset(n) => {
+                // The reply goes to the peer once the console has the commands.
+                e.eos_preset(n, peer)?;
+                Ok(Vec::new())
+            }
         }
     }
 }

@@ -56,6 +56,7 @@ pub struct Engine {
     writer: Writer,
     subscribers: Mutex<Vec<Subscriber>>,
     push: OnceLock<Sender>,
+    eos: crate::eos::EosConfig,
 }
 
 impl Engine {
@@ -85,6 +86,7 @@ impl Engine {
             files,
             subscribers: Mutex::new(Vec::new()),
             push: OnceLock::new(),
+            eos: config.eos.clone(),
             stage,
         })
     }
@@ -243,6 +245,35 @@ impl Engine {
         Ok(())
     }
 
+    /// Pushes the live look to the configured Eos console and records it as preset `n`,
+    /// on its own thread (a console may be slow to connect); `/vo/eos/preset n lights` goes
+    /// to `peer` when it is sent, or `/vo/error` if it could not be.
+    pub fn eos_preset(&self, n: u32, peer: &Peer) -> Result<(), String> {
+        let to = self.eos.console()?.ok_or(
+            "no Eos console is configured: set [eos] address (and protocol) in the config",
+        )?;
+        let commands = crate::eos::preset_commands(&self.stage.scene, &self.session().live, n);
+        let lights = self.stage.scene.lights.len();
+        let (config, peer) = (self.eos.clone(), peer.clone());
+        std::thread::Builder::new()
+            .name("eos".into())
+            .spawn(move || {
+                let reply = match crate::eos::push(&config, to, &commands) {
+                    Ok(()) => msg(
+                        "/vo/eos/preset",
+                        vec![OscType::Int(n as i32), OscType::Int(lights as i32)],
+                    ),
+                    Err(e) => {
+                        tracing::warn!("/vo/eos/preset {n}: {e}");
+                        error("/vo/eos/preset", &e)
+                    }
+                };
+                peer.reply(&[reply]);
+            })
+            .map(drop)
+            .map_err(|e| format!("cannot start the Eos export: {e}"))
+    }
+
     /// Whether a generate is running.
     pub fn is_generating(&self) -> bool {
         self.generating.load(Ordering::SeqCst)
@@ -289,21 +320,27 @@ impl Engine {
         subs.retain(|s| s.from != peer.addr().ip());
     }
 
+    /// Sends messages to `to` from the OSC port (pushes, not replies).
+    pub fn push_to(&self, to: SocketAddr, msgs: &[OscMessage]) -> Result<(), String> {
+        let push = self
+            .push
+            .get()
+            .ok_or("subscriptions need OSC over UDP (osc.udp is off)")?;
+        msgs.iter().try_for_each(|m| push.send(to, m))
+    }
+
     /// Pushes messages to every live subscriber; expired or unreachable ones are dropped.
     pub fn notify(&self, msgs: &[OscMessage]) {
-        let Some(push) = self.push.get() else {
-            return;
-        };
         let mut subs = self.subscribers.lock().unwrap_or_else(|p| p.into_inner());
         subs.retain(|s| {
             s.last_seen.elapsed() < SUBSCRIPTION
-                && msgs.iter().all(|m| match push.send(s.to, m) {
+                && match self.push_to(s.to, msgs) {
                     Ok(()) => true,
                     Err(e) => {
                         tracing::info!("dropped the subscription of {}: {e}", s.to);
                         false
                     }
-                })
+                }
         });
     }
 

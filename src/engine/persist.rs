@@ -15,7 +15,7 @@ use serde::{Deserialize, Serialize};
 
 use super::session::{Entry, Session};
 use crate::look::LookFile;
-use crate::objective::{Analysis, Aspects, IntensityStats, Objective, PaletteColor, Region};
+use crate::objective::ObjectiveRecord;
 use crate::scene::Scene;
 use crate::state::{Loaded, load_json, save_json};
 
@@ -39,17 +39,12 @@ pub struct LooksFile {
     pub looks: BTreeMap<u32, LookFile>,
 }
 
-/// One objective as stored: its analysis is kept, so it survives the image being removed.
+/// One objective as stored, with the id OSC addresses use.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct ObjectiveFile {
     id: u32,
-    image: String,
-    aspects: String,
-    region: [f32; 4],
-    mean_l: f32,
-    key_l: f32,
-    bright: f32,
-    palette: Vec<([f32; 3], f32)>,
+    #[serde(flatten)]
+    record: ObjectiveRecord,
 }
 
 /// `session.json`: objectives, constraints (by name, so a re-ordered scene keeps them) and
@@ -141,26 +136,9 @@ fn apply_session(scene: &Scene, f: &SessionFile, s: &mut Session) {
         .objectives
         .iter()
         .filter_map(|o| {
-            let region = Region::new(o.region[0], o.region[1], o.region[2], o.region[3]).ok()?;
             Some(Entry {
                 id: o.id,
-                objective: Objective {
-                    image: o.image.clone(),
-                    aspects: Aspects::parse(&o.aspects).ok()?,
-                    region,
-                    analysis: Analysis {
-                        stats: IntensityStats {
-                            mean_l: o.mean_l,
-                            key_l: o.key_l,
-                            bright: o.bright,
-                        },
-                        palette: o
-                            .palette
-                            .iter()
-                            .map(|&(color, weight)| PaletteColor { color, weight })
-                            .collect(),
-                    },
-                },
+                objective: o.record.to_objective()?,
             })
         })
         .collect();
@@ -218,23 +196,9 @@ impl Snapshot {
                 objectives: s
                     .objectives
                     .iter()
-                    .map(|e| {
-                        let o = &e.objective;
-                        ObjectiveFile {
-                            id: e.id,
-                            image: o.image.clone(),
-                            aspects: o.aspects.name().to_string(),
-                            region: [o.region.x0, o.region.y0, o.region.x1, o.region.y1],
-                            mean_l: o.analysis.stats.mean_l,
-                            key_l: o.analysis.stats.key_l,
-                            bright: o.analysis.stats.bright,
-                            palette: o
-                                .analysis
-                                .palette
-                                .iter()
-                                .map(|p| (p.color, p.weight))
-                                .collect(),
-                        }
+                    .map(|e| ObjectiveFile {
+                        id: e.id,
+                        record: ObjectiveRecord::from(&e.objective),
                     })
                     .collect(),
                 next_id: s.next_id,

@@ -1,6 +1,9 @@
 //! Builders for small synthetic scenes and reference images that tests write themselves.
 #![allow(dead_code)]
 
+pub mod daemon;
+pub mod wire;
+
 use std::path::{Path, PathBuf};
 
 /// A light of a synthetic scene: its basis image as a function of pixel position.

@@ -1,0 +1,348 @@
+//! Generate, the gallery, pick/next/prev, undo/redo and the constraints of osc.md against
+//! the real daemon, each with refused cases that change nothing.
+
+mod common;
+
+use common::daemon::{
+    CLUSTERS, COUNT, Daemon, Light, Osc, STAGE, fixture, float, int, num, same_look, string, text,
+};
+
+/// A daemon with one objective and a generated gallery; returns it with the entry sizes.
+fn generated(name: &str) -> (Daemon, Vec<i32>) {
+    let mut d = Daemon::start(name);
+    d.add_objective("warm.png", "both");
+    d.generate();
+    let sizes = d.gallery();
+    (d, sizes)
+}
+
+fn check_look(look: &[Light]) {
+    assert_eq!(
+        look.iter().map(|l| l.ch).collect::<Vec<_>>(),
+        STAGE.iter().map(|f| f.channel).collect::<Vec<_>>()
+    );
+    for l in look {
+        assert!((0.0..=1.0).contains(&l.intensity), "{l:?}");
+        assert!(l.color.iter().all(|c| (0.0..=1.0).contains(c)), "{l:?}");
+        if !fixture(l.ch).has_colour() {
+            assert_eq!(l.color, [1.0; 3], "a dimmer reports 1 1 1: {l:?}");
+        }
+    }
+}
+
+#[test]
+fn generate_fills_the_gallery() {
+    let mut d = Daemon::start("gal-generate");
+    // Nothing to aim at yet.
+    d.refused("/vo/generate", vec![]);
+    d.add_objective("warm.png", "both");
+    let r = d.generate();
+    assert_eq!(r.args.len(), 4, "candidates clusters ms seed: {r:?}");
+    let (n, c) = (num(&r.args[0]) as i32, num(&r.args[1]) as i32);
+    assert_eq!(n, COUNT);
+    assert!((1..=CLUSTERS).contains(&c), "{r:?}");
+    assert!(num(&r.args[2]) >= 0.0, "{r:?}");
+    let s = d.status();
+    assert_eq!((s.candidates, s.clusters, s.entry), (n, c, 0));
+    let sizes = d.gallery();
+    assert_eq!(sizes.len() as i32, c);
+    assert!(sizes.iter().all(|&s| s >= 1), "{sizes:?}");
+    assert_eq!(sizes.iter().sum::<i32>(), n, "every candidate in one entry");
+    let mut lit = 0;
+    for (k, &size) in sizes.iter().enumerate() {
+        for m in [1, size] {
+            let look = d.candidate(k as i32 + 1, m);
+            check_look(&look);
+            lit += look.iter().filter(|l| l.intensity > 0.05).count();
+        }
+    }
+    assert!(lit > 0, "every candidate is dark");
+    // Generating does not change the stage.
+    assert!(d.live().iter().all(|l| l.intensity == 0.0));
+    d.refused("/vo/generatee", vec![]);
+}
+
+#[test]
+fn count_clusters_and_seed() {
+    let mut d = Daemon::start("gal-settings");
+    d.add_objective("cool.png", "both");
+    let r = d.ok("/vo/generate/count", vec![int(12)], "/vo/generate/count");
+    assert_eq!(num(&r.args[0]) as i32, 12);
+    let r = d.ok(
+        "/vo/generate/clusters",
+        vec![int(3)],
+        "/vo/generate/clusters",
+    );
+    assert_eq!(num(&r.args[0]) as i32, 3);
+    let r = d.ok("/vo/generate/seed", vec![int(7)], "/vo/generate/seed");
+    assert_eq!(num(&r.args[0]) as i32, 7);
+    let g = d.generate();
+    assert_eq!(num(&g.args[0]) as i32, 12);
+    assert!((1..=3).contains(&(num(&g.args[1]) as i32)), "{g:?}");
+    assert_eq!(num(&g.args[3]) as i32, 7, "the seed used: {g:?}");
+    let first = d.candidate(1, 1);
+    let sizes = d.gallery();
+    // Same scene, objectives, stage look and seed: the same candidates.
+    d.generate();
+    assert_eq!(d.gallery(), sizes);
+    assert_eq!(d.candidate(1, 1), first);
+
+    for (addr, bad) in [
+        ("/vo/generate/count", vec![int(0)]),
+        ("/vo/generate/count", vec![int(1001)]),
+        ("/vo/generate/count", vec![float(2.5)]),
+        ("/vo/generate/count", vec![string("many")]),
+        ("/vo/generate/count", vec![]),
+        ("/vo/generate/clusters", vec![int(0)]),
+        ("/vo/generate/clusters", vec![int(65)]),
+        ("/vo/generate/seed", vec![int(-1)]),
+        ("/vo/generate/seed", vec![float(1.5)]),
+        ("/vo/generate/seed", vec![string("x")]),
+    ] {
+        d.refused(addr, bad);
+    }
+    // Still 12 / 3 / 7.
+    let g = d.generate();
+    assert_eq!(num(&g.args[0]) as i32, 12);
+    assert_eq!(num(&g.args[3]) as i32, 7);
+    // Seed 0: a new random seed each time, reported.
+    d.ok("/vo/generate/seed", vec![int(0)], "/vo/generate/seed");
+    let a = num(&d.generate().args[3]) as i64;
+    let b = num(&d.generate().args[3]) as i64;
+    assert_ne!(a, b, "seed 0 draws a new seed each time");
+}
+
+#[test]
+fn pick_goes_live_and_becomes_the_base() {
+    let mut d = Daemon::start("gal-pick");
+    d.add_objective("warm.png", "both");
+    d.refused("/vo/pick", vec![int(1)]);
+    d.generate();
+    let sizes = d.gallery();
+    let c = sizes.len() as i32;
+    let k = c.min(2);
+    let r = d.ok("/vo/pick", vec![int(k)], "/vo/picked");
+    assert_eq!((num(&r.args[0]) as i32, num(&r.args[1]) as i32), (k, 1));
+    assert_eq!(d.status().entry, k);
+    let want = d.candidate(k, 1);
+    // fade_s = 0 in the config: live at once.
+    assert!(
+        same_look(&d.live(), &want, 1e-6),
+        "{:?} vs {want:?}",
+        d.live()
+    );
+    if let Some(big) = sizes.iter().position(|&s| s >= 2) {
+        let k = big as i32 + 1;
+        let r = d.ok("/vo/pick", vec![int(k), int(2)], "/vo/picked");
+        assert_eq!(num(&r.args[1]) as i32, 2);
+        assert!(same_look(&d.live(), &d.candidate(k, 2), 1e-6));
+    }
+    d.ok("/vo/pick", vec![int(k)], "/vo/picked");
+    for bad in [
+        vec![int(0)],
+        vec![int(c + 1)],
+        vec![int(1), int(sizes[0] + 1)],
+        vec![int(1), int(0)],
+        vec![string("one")],
+        vec![float(1.5)],
+        vec![],
+    ] {
+        d.refused("/vo/pick", bad);
+    }
+    // The picked look is the base: locked lights keep it in every new candidate.
+    let base = d.live();
+    d.ok("/vo/group/side/lock", vec![int(1)], "/vo/group/lock");
+    d.generate();
+    for (e, &size) in d.gallery().iter().enumerate() {
+        for m in 1..=size {
+            let cand = d.candidate(e as i32 + 1, m);
+            for (got, want) in cand.iter().zip(&base) {
+                if fixture(got.ch).group == "side" {
+                    assert!(
+                        same_look(std::slice::from_ref(got), std::slice::from_ref(want), 1e-4),
+                        "locked light {} moved: {got:?} vs base {want:?}",
+                        got.ch
+                    );
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn next_and_prev_step_and_wrap() {
+    let (mut d, sizes) = generated("gal-next");
+    let c = sizes.len() as i32;
+    d.ok("/vo/pick", vec![int(1)], "/vo/picked");
+    let r = d.ok("/vo/prev", vec![], "/vo/picked");
+    assert_eq!(
+        (num(&r.args[0]) as i32, num(&r.args[1]) as i32),
+        (c, 1),
+        "wraps back"
+    );
+    assert!(same_look(&d.live(), &d.candidate(c, 1), 1e-6));
+    let r = d.ok("/vo/next", vec![], "/vo/picked");
+    assert_eq!(num(&r.args[0]) as i32, 1, "wraps forward");
+    let r = d.ok("/vo/next", vec![], "/vo/picked");
+    assert_eq!(num(&r.args[0]) as i32, 2.min(c));
+    assert_eq!(d.status().entry, 2.min(c));
+    assert!(same_look(&d.live(), &d.candidate(2.min(c), 1), 1e-6));
+    d.refused("/vo/nextt", vec![]);
+    d.refused("/vo/next/entry", vec![]);
+
+    let mut fresh = Daemon::start("gal-next-empty");
+    fresh.refused("/vo/next", vec![]);
+    fresh.refused("/vo/prev", vec![]);
+}
+
+#[test]
+fn undo_and_redo_walk_the_base_history() {
+    let (mut d, sizes) = generated("gal-undo");
+    let c = sizes.len() as i32;
+    assert!(c >= 2, "the test needs two entries, got {sizes:?}");
+    d.refused("/vo/redo", vec![]);
+    d.ok("/vo/pick", vec![int(1)], "/vo/picked");
+    d.ok("/vo/pick", vec![int(2)], "/vo/picked");
+    let (one, two) = (d.candidate(1, 1), d.candidate(2, 1));
+    let r = d.ok("/vo/undo", vec![], "/vo/undone");
+    let depth = num(&r.args[0]) as i32;
+    assert!(depth >= 0, "{r:?}");
+    assert!(
+        same_look(&d.live(), &one, 1e-6),
+        "undo brings back the previous look"
+    );
+    let r = d.ok("/vo/redo", vec![], "/vo/redone");
+    assert!(num(&r.args[0]) as i32 >= 0, "{r:?}");
+    assert!(
+        same_look(&d.live(), &two, 1e-6),
+        "redo brings the undone look back"
+    );
+    d.refused("/vo/redo", vec![]);
+    // Undo all the way back to the dark start, then no further.
+    d.ok("/vo/undo", vec![], "/vo/undone");
+    let r = d.ok("/vo/undo", vec![], "/vo/undone");
+    assert!(num(&r.args[0]) as i32 <= depth, "{r:?}");
+    assert!(
+        d.live().iter().all(|l| l.intensity == 0.0),
+        "{:?}",
+        d.live()
+    );
+    d.refused("/vo/undo", vec![]);
+    d.refused("/vo/undoo", vec![]);
+    // 32 steps at least.
+    for i in 0..33 {
+        d.ok("/vo/pick", vec![int(1 + i % 2)], "/vo/picked");
+    }
+    for i in 0..32 {
+        let r = d.call("/vo/undo", vec![], "/vo/undone");
+        assert_eq!(
+            r.last().map(|m| m.addr.as_str()),
+            Some("/vo/undone"),
+            "undo {i}: {r:?}"
+        );
+    }
+}
+
+#[test]
+fn candidate_and_gallery_refuse_what_is_not_there() {
+    let mut d = Daemon::start("gal-candidate");
+    d.refused("/vo/candidate", vec![int(1)]);
+    // No gallery yet: zero entries.
+    let r = d.ok("/vo/gallery", vec![], "/vo/gallery");
+    assert_eq!(r.args.iter().map(num).collect::<Vec<_>>(), [0.0], "{r:?}");
+    d.add_objective("grey.png", "both");
+    d.generate();
+    let sizes = d.gallery();
+    let c = sizes.len() as i32;
+    let r = d.ok("/vo/candidate/1", vec![], "/vo/candidate");
+    assert_eq!(
+        (num(&r.args[0]) as i32, num(&r.args[1]) as i32),
+        (1, 1),
+        "m defaults to 1"
+    );
+    for bad in [
+        vec![int(0)],
+        vec![int(c + 1)],
+        vec![int(1), int(sizes[0] + 1)],
+        vec![string("best")],
+        vec![],
+    ] {
+        d.refused("/vo/candidate", bad);
+    }
+    d.refused("/vo/galleryy", vec![]);
+}
+
+#[test]
+fn unreached_and_locked_lights_keep_the_base() {
+    let mut d = Daemon::start("gal-targeting");
+    // A base look: light 4 (right half) and light 1 (left half) set by faders.
+    d.ok("/vo/light/4/intensity", vec![float(0.3)], "/vo/light");
+    d.ok(
+        "/vo/light/4/color",
+        vec![float(0.2), float(0.4), float(0.6)],
+        "/vo/light",
+    );
+    d.ok("/vo/light/1/level", vec![int(70)], "/vo/light");
+    let base = d.live();
+    let id = d.add_objective("warm.png", "both");
+    let r = d.ok(
+        &format!("/vo/objective/{id}/region"),
+        [0.0, 0.0, 0.5, 1.0].map(float).to_vec(),
+        "/vo/objective/region",
+    );
+    assert_eq!(num(&r.args[5]) as i32, 3);
+    let r = d.ok("/vo/light/2/lock", vec![int(1)], "/vo/light/lock");
+    assert_eq!((num(&r.args[0]) as i32, num(&r.args[1]) as i32), (2, 1));
+    d.generate();
+    let mut moved = 0;
+    for (e, &size) in d.gallery().iter().enumerate() {
+        for m in 1..=size {
+            let cand = d.candidate(e as i32 + 1, m);
+            for (got, want) in cand.iter().zip(&base) {
+                let same = same_look(std::slice::from_ref(got), std::slice::from_ref(want), 1e-4);
+                if got.ch >= 4 || got.ch == 2 {
+                    assert!(
+                        same,
+                        "light {} is unreached or locked: {got:?} vs {want:?}",
+                        got.ch
+                    );
+                } else if !same {
+                    moved += 1;
+                }
+            }
+        }
+    }
+    assert!(moved > 0, "lights 1 and 3 never moved");
+}
+
+#[test]
+fn constraints_reply_and_refuse() {
+    let mut d = Daemon::start("gal-constraints");
+    let r = d.ok("/vo/group/front/key", vec![int(1)], "/vo/group/key");
+    assert_eq!(
+        (text(&r.args[0]).as_str(), num(&r.args[1]) as i32),
+        ("front", 1)
+    );
+    let r = d.ok("/vo/group/front/key", vec![int(0)], "/vo/group/key");
+    assert_eq!(num(&r.args[1]) as i32, 0);
+    let r = d.ok("/vo/group/back/lock", vec![float(1.0)], "/vo/group/lock");
+    assert_eq!(
+        (text(&r.args[0]).as_str(), num(&r.args[1]) as i32),
+        ("back", 1)
+    );
+    let r = d.ok("/vo/light/3/lock", vec![string("1")], "/vo/light/lock");
+    assert_eq!((num(&r.args[0]) as i32, num(&r.args[1]) as i32), (3, 1));
+    for (addr, args) in [
+        ("/vo/group/wings/key", vec![int(1)]),
+        ("/vo/group/front/key", vec![int(2)]),
+        ("/vo/group/front/key", vec![string("yes")]),
+        ("/vo/group/front/key", vec![]),
+        ("/vo/group/wings/lock", vec![int(1)]),
+        ("/vo/group/back/lock", vec![float(0.5)]),
+        ("/vo/light/99/lock", vec![int(1)]),
+        ("/vo/light/0/lock", vec![int(1)]),
+        ("/vo/light/3/lock", vec![int(-1)]),
+    ] {
+        d.refused(addr, args);
+    }
+}
