@@ -241,6 +241,73 @@ mod x86 {
         }
     }
 
+    /// Where interleaved element k (pixel k / 3, channel k % 3) of output vector `j` comes
+    /// from: first from R (0..16) or G (16..32) of its pixel group, then B (16..32) is laid
+    /// over the blue slots (the others keep their lane).
+    const fn interleave_index(j: usize, blue: bool) -> [i32; 16] {
+        let mut idx = [0i32; 16];
+        let mut lane = 0;
+        while lane < 16 {
+            let k = 16 * j + lane;
+            let (p, c) = ((k / 3) as i32, k % 3);
+            idx[lane] = match (blue, c) {
+                (false, 0) => p,
+                (false, 1) => 16 + p,
+                (false, _) => 0,
+                (true, 2) => 16 + p,
+                (true, _) => lane as i32,
+            };
+            lane += 1;
+        }
+        idx
+    }
+
+    /// Clamps 16-pixel groups of planar RGB to 0..1 and interleaves them into `out`, with
+    /// two permutes per output vector; returns the pixels done (the rest is left to the
+    /// caller).
+    #[target_feature(enable = "avx512f")]
+    pub(super) fn interleave_clamped_avx512(rgb: [&[f32]; 3], out: &mut [f32]) -> usize {
+        const RG: [[i32; 16]; 3] = [
+            interleave_index(0, false),
+            interleave_index(1, false),
+            interleave_index(2, false),
+        ];
+        const B: [[i32; 16]; 3] = [
+            interleave_index(0, true),
+            interleave_index(1, true),
+            interleave_index(2, true),
+        ];
+        let n = (out.len() / 3)
+            .min(rgb[0].len())
+            .min(rgb[1].len())
+            .min(rgb[2].len());
+        let groups = n / 16;
+        let (zero, one) = (_mm512_setzero_ps(), _mm512_set1_ps(1.0));
+        for g in 0..groups {
+            let mut v = [zero; 3];
+            for (v, plane) in v.iter_mut().zip(rgb) {
+                // SAFETY: 16 * g + 16 <= n <= plane.len().
+                let x = unsafe { _mm512_loadu_ps(plane.as_ptr().add(16 * g)) };
+                // NaN would become 0 here (clamp keeps it); basis and weights are finite.
+                *v = _mm512_min_ps(_mm512_max_ps(x, zero), one);
+            }
+            for j in 0..3 {
+                // SAFETY: the index tables are compile-time constants, read by value.
+                let (rg, b) = unsafe {
+                    (
+                        _mm512_loadu_si512(RG[j].as_ptr().cast()),
+                        _mm512_loadu_si512(B[j].as_ptr().cast()),
+                    )
+                };
+                let t = _mm512_permutex2var_ps(v[0], rg, v[1]);
+                let o = _mm512_permutex2var_ps(t, b, v[2]);
+                // SAFETY: 48 * g + 16 * j + 16 <= 3 * n <= out.len().
+                unsafe { _mm512_storeu_ps(out.as_mut_ptr().add(48 * g + 16 * j), o) };
+            }
+        }
+        groups * 16
+    }
+
     /// Copies `src` into `dst` with non-temporal stores for the 16-byte aligned middle:
     /// outputs written once and read much later should not evict the basis panel.
     pub(super) fn stream_copy(dst: &mut [f32], src: &[f32]) {
@@ -305,7 +372,13 @@ pub fn composite_clamped(
     composite_with(kernel, basis, weights, outputs, |rgb, out| {
         let mut buf = [0.0f32; STRIP * 3];
         let n = out.len() / 3;
-        for (i, px) in buf[..n * 3].chunks_exact_mut(3).enumerate() {
+        let mut done = 0;
+        #[cfg(target_arch = "x86_64")]
+        if kernel == Kernel::Avx512 {
+            // SAFETY: composite_with asserted that this kernel's features are present.
+            done = unsafe { x86::interleave_clamped_avx512(rgb, &mut buf[..n * 3]) };
+        }
+        for (i, px) in buf[..n * 3].chunks_exact_mut(3).enumerate().skip(done) {
             px[0] = rgb[0][i].clamp(0.0, 1.0);
             px[1] = rgb[1][i].clamp(0.0, 1.0);
             px[2] = rgb[2][i].clamp(0.0, 1.0);
