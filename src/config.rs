@@ -29,6 +29,8 @@ pub struct Config {
     pub generate: GenerateConfig,
     /// The Eos console presets are exported to (none by default).
     pub eos: EosConfig,
+    /// The web gallery (off by default).
+    pub http: HttpConfig,
 }
 
 #[derive(Deserialize)]
@@ -41,6 +43,7 @@ struct ConfigFile {
     output: OutputConfig,
     generate: GenerateConfig,
     eos: EosConfig,
+    http: HttpConfig,
 }
 
 impl Default for ConfigFile {
@@ -53,6 +56,7 @@ impl Default for ConfigFile {
             output: OutputConfig::default(),
             generate: GenerateConfig::default(),
             eos: EosConfig::default(),
+            http: HttpConfig::default(),
         }
     }
 }
@@ -80,6 +84,15 @@ impl Default for OscConfig {
             allow: Vec::new(),
         }
     }
+}
+
+/// The `[http]` section: the web gallery (README, "The web gallery").
+#[derive(Debug, Clone, PartialEq, Default, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct HttpConfig {
+    /// Listen address such as `127.0.0.1:8080`; empty (the default) turns it off. Its
+    /// clients are checked against `osc.allow` like OSC senders.
+    pub listen: String,
 }
 
 /// The `[generate]` section.
@@ -188,7 +201,11 @@ impl Config {
                 dir.join(p)
             }
         };
-        for (key, value) in [("osc.udp", &file.osc.udp), ("osc.tcp", &file.osc.tcp)] {
+        for (key, value) in [
+            ("osc.udp", &file.osc.udp),
+            ("osc.tcp", &file.osc.tcp),
+            ("http.listen", &file.http.listen),
+        ] {
             if !value.is_empty() && value.parse::<SocketAddr>().is_err() {
                 return Err(at(format!(
                     "{key}: `{value}` is not an address:port such as 127.0.0.1:8000"
@@ -234,6 +251,7 @@ impl Config {
             output: file.output,
             generate: file.generate,
             eos: file.eos,
+            http: file.http,
         })
     }
 
@@ -244,6 +262,21 @@ impl Config {
             .iter()
             .filter_map(|a| Cidr::parse(a).ok())
             .collect()
+    }
+}
+
+/// Whether `ip` may talk to the daemon: on `allow` (addresses or CIDR blocks), or on
+/// loopback when `allow` is empty. The web gallery uses it; OSC checks the same rule.
+pub fn permits(allow: &[Cidr], ip: IpAddr) -> bool {
+    if allow.is_empty() {
+        match ip {
+            IpAddr::V4(v4) => v4.is_loopback(),
+            IpAddr::V6(v6) => v6
+                .to_ipv4_mapped()
+                .map_or(v6.is_loopback(), |v4| v4.is_loopback()),
+        }
+    } else {
+        allow.iter().any(|c| c.contains(ip))
     }
 }
 
@@ -276,6 +309,31 @@ mod tests {
         let e =
             Config::parse(Path::new("c.toml"), "scene = \"x\"\n[osc]\nudpp = \"1\"\n").unwrap_err();
         assert!(e.contains("line 3") && e.contains("udpp"), "{e}");
+    }
+
+    #[test]
+    fn http_is_off_by_default_and_checked() {
+        let c = Config::parse(Path::new("c.toml"), "").unwrap();
+        assert_eq!(c.http.listen, "");
+        let c =
+            Config::parse(Path::new("c.toml"), "[http]\nlisten = \"127.0.0.1:8080\"\n").unwrap();
+        assert_eq!(c.http.listen, "127.0.0.1:8080");
+        let e = Config::parse(Path::new("c.toml"), "[http]\nlisten = \"8080\"\n").unwrap_err();
+        assert!(e.contains("http.listen"), "{e}");
+        let e = Config::parse(Path::new("c.toml"), "[http]\nport = 1\n").unwrap_err();
+        assert!(e.contains("port"), "{e}");
+    }
+
+    #[test]
+    fn permits_loopback_by_default_and_the_list_otherwise() {
+        let ip = |s: &str| s.parse::<IpAddr>().unwrap();
+        assert!(permits(&[], ip("127.0.0.1")));
+        assert!(permits(&[], ip("::1")));
+        assert!(permits(&[], ip("::ffff:127.0.0.1")));
+        assert!(!permits(&[], ip("10.0.0.5")));
+        let list = [Cidr::parse("10.0.0.0/24").unwrap()];
+        assert!(permits(&list, ip("10.0.0.5")));
+        assert!(!permits(&list, ip("127.0.0.1")));
     }
 
     #[test]

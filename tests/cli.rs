@@ -400,3 +400,41 @@ fn basis_images_may_be_half_or_float_rgb_or_rgba_scanline_or_tiled() {
     assert_eq!(img.get_pixel(5, 3).0, [want; 3]);
     assert_eq!(img.get_pixel(9, 3).0, [0; 3]);
 }
+
+#[test]
+fn check_fits_a_small_screen_and_names_the_web_gallery_and_console() {
+    let dir = temp_dir("cli-check-booth");
+    stripes(&dir.join("scene"), 6, true);
+    let config = dir.join("visobjd.toml");
+    let allow: Vec<String> = (1..=8).map(|i| format!("\"10.101.{i}.0/24\"")).collect();
+    std::fs::write(
+        &config,
+        format!(
+            "scene = \"scene\"\n[osc]\nallow = [{}]\n[http]\nlisten = \"127.0.0.1:8080\"\n\
+             [eos]\naddress = \"10.101.0.5:3032\"\nprotocol = \"tcp-slip\"\n",
+            allow.join(", ")
+        ),
+    )
+    .unwrap();
+    let out = run(&["check", "--config", s(&config)]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains("http     web gallery on http://127.0.0.1:8080/"),
+        "{text}"
+    );
+    assert!(
+        text.contains("eos      presets to 10.101.0.5:3032 over tcp-slip"),
+        "{text}"
+    );
+    // The long allow-list wraps instead of running off a booth screen.
+    assert!(text.contains("10.101.8.0/24"), "{text}");
+    for line in text.lines().filter(|l| !l.contains(dir.to_str().unwrap())) {
+        assert!(line.len() < 80, "{line:?} is {} columns", line.len());
+    }
+    let _ = std::fs::remove_dir_all(dir);
+}

@@ -47,7 +47,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         );
     let bytes = stage.proxy.bytes() + stage.thumbs.bytes();
     let out = &config.output;
-    let line = |k: &str, v: String| println!("{k:<9}{v}");
+    let line = |k: &str, v: String| print!("{}", wrap(k, &v));
     line("config", format!("{} ok", config.path.display()));
     line(
         "scene",
@@ -107,6 +107,31 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ),
     );
     line(
+        "http",
+        if config.http.listen.is_empty() {
+            "off".to_string()
+        } else {
+            format!(
+                "web gallery on http://{}/ (same allow-list)",
+                config.http.listen
+            )
+        },
+    );
+    line(
+        "eos",
+        match config.eos.console() {
+            Ok(Some(addr)) => format!(
+                "presets to {addr} over {}",
+                match config.eos.protocol {
+                    crate::eos::Protocol::Udp => "udp",
+                    crate::eos::Protocol::Tcp => "tcp (OSC 1.0)",
+                    crate::eos::Protocol::TcpSlip => "tcp-slip (OSC 1.1)",
+                }
+            ),
+            _ => "off".to_string(),
+        },
+    );
+    line(
         "output",
         format!(
             "{} sACN and {} Art-Net destinations at {} Hz, fade {} s",
@@ -119,6 +144,65 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Width of a booth screen's terminal: lines are kept shorter.
+const COLUMNS: usize = 80;
+
+/// `key` in a 9-column margin, then `value` wrapped at `, ` (then spaces) so no line
+/// reaches [`COLUMNS`]; a single word longer than that (a path) stays whole.
+fn wrap(key: &str, value: &str) -> String {
+    let width = COLUMNS - 1 - 9;
+    let mut lines: Vec<String> = vec![String::new()];
+    let pieces = value.split_inclusive(", ").flat_map(|p| {
+        if p.len() > width {
+            p.split_inclusive(' ').collect::<Vec<_>>()
+        } else {
+            vec![p]
+        }
+    });
+    for piece in pieces {
+        let last = lines.last_mut().expect("one line at least");
+        if !last.is_empty() && last.trim_end().len() + piece.trim_end().len() > width {
+            lines.push(piece.to_string());
+        } else {
+            last.push_str(piece);
+        }
+    }
+    let mut out = String::new();
+    for (i, l) in lines.iter().enumerate() {
+        let k = if i == 0 { key } else { "" };
+        out.push_str(&format!("{k:<9}{}\n", l.trim_end()));
+    }
+    out
+}
+
 fn or_off(addr: &str) -> &str {
     if addr.is_empty() { "off" } else { addr }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn long_values_wrap_under_eighty_columns() {
+        let v = (1..=12)
+            .map(|u| format!("universe {u}: 120/512 slots"))
+            .collect::<Vec<_>>()
+            .join(", ");
+        let text = wrap("dmx", &v);
+        assert!(text.lines().count() > 3, "{text}");
+        assert!(text.lines().all(|l| l.len() < COLUMNS), "{text}");
+        assert!(
+            text.starts_with("dmx      universe 1: 120/512 slots, "),
+            "{text}"
+        );
+        assert!(
+            text.lines().skip(1).all(|l| l.starts_with("         u")),
+            "{text}"
+        );
+        // Nothing lost or reordered.
+        let joined: String = text.lines().map(|l| &l[9..]).collect::<Vec<_>>().join(" ");
+        assert_eq!(joined, v);
+        assert_eq!(wrap("osc", "udp off"), "osc      udp off\n");
+    }
 }

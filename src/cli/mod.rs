@@ -6,6 +6,7 @@ mod gallery;
 mod render;
 mod run;
 mod send;
+mod touchosc;
 
 use clap::{ArgMatches, CommandFactory, FromArgMatches, Parser, Subcommand};
 
@@ -38,6 +39,8 @@ enum Command {
     },
     /// A small OSC client: sends one message, prints the replies that arrive within --wait.
     Send(send::Args),
+    /// Writes the TouchOSC layout for the booth tablet (regenerate it when addresses change).
+    Touchosc(touchosc::Args),
     /// Measures the FLOP bound and the performance targets on this machine.
     Bench(bench::Args),
 }
@@ -72,6 +75,7 @@ pub fn main() -> std::process::ExitCode {
             })
             .map_err(anyhow::Error::from),
         Command::Send(args) => send::run(args),
+        Command::Touchosc(args) => touchosc::run(args),
         Command::Bench(args) => bench::run(args),
     };
     match result {

@@ -37,12 +37,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .or_else(|_| tracing_subscriber::EnvFilter::try_new(&args.log_level))
         .context("--log-level: not a log filter")?;
-    tracing_subscriber::fmt()
+    // Under systemd, stderr goes to journald, which stamps each line itself: no second
+    // timestamp and no colour there; a terminal gets both.
+    let terminal = std::io::IsTerminal::is_terminal(&std::io::stderr());
+    let journal = !terminal && std::env::var_os("JOURNAL_STREAM").is_some();
+    let logs = tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
-        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+        .with_ansi(terminal)
         .with_target(false)
-        .init();
+        .compact();
+    if journal {
+        logs.without_time().init();
+    } else {
+        logs.init();
+    }
 
     let config = Config::load(&args.config).map_err(anyhow::Error::msg)?;
     let scene = Scene::load(&config.scene)?;
@@ -108,6 +117,14 @@ async fn serve(config: &Config, engine: &Arc<Engine>) -> anyhow::Result<()> {
         .map_err(anyhow::Error::msg)?;
     if let Some(sender) = server.sender() {
         engine.set_push(sender);
+    }
+    // The web gallery lives as long as the runtime.
+    if !config.http.listen.is_empty() {
+        let http =
+            crate::http::Http::start(&config.http.listen, config.allow_list(), Arc::clone(engine))
+                .await
+                .map_err(anyhow::Error::msg)?;
+        tracing::info!("web gallery on http://{}/", http.addr());
     }
     let _ = sd_notify::notify(&[sd_notify::NotifyState::Ready]);
     if let Some(period) = sd_notify::watchdog_enabled() {

@@ -74,9 +74,9 @@ impl Cmd {
                     "nothing to redo"
                 })?;
                 e.show(&s, s.fade_s);
-                let status = e.status(&s);
+                let feedback = e.feedback(&s);
                 e.persist(s, true);
-                e.notify(&[status]);
+                e.notify(&feedback);
                 let addr = if undo { "/vo/undone" } else { "/vo/redone" };
                 Ok(vec![msg(addr, vec![int(depth)])])
             }
@@ -103,9 +103,9 @@ fn pick(
     s.entry = Some((k, m));
     e.show(&s, s.fade_s);
     let picked = msg("/vo/picked", vec![int(k), int(m)]);
-    let status = e.status(&s);
+    let feedback = e.feedback(&s);
     e.persist(s, true);
-    e.notify(&[picked.clone(), status]);
+    e.notify(&[std::slice::from_ref(&picked), feedback.as_slice()].concat());
     Ok(vec![picked])
 }
 

@@ -64,7 +64,8 @@ impl Cmd {
     pub fn apply(self, e: &Arc<Engine>) -> Result<Vec<OscMessage>, String> {
         let scene = &e.stage.scene;
         let mut s = e.session();
-        let (reply, wait) = match self {
+        // (reply, wait for the disk, push the reply too: another tablet's fader follows)
+        let (reply, wait, push) = match self {
             Cmd::Fader(target, value) => {
                 let lights = match &target {
                     Target::Light(ch) => vec![light(scene, ch)?],
@@ -114,7 +115,7 @@ impl Cmd {
                         )
                     }
                 };
-                (reply, false)
+                (reply, false, false)
             }
             Cmd::Live => {
                 let mut a = Vec::with_capacity(scene.lights.len() * 5);
@@ -123,22 +124,25 @@ impl Cmd {
             }
             Cmd::Fade(v) => {
                 s.fade_s = v;
-                (msg("/vo/fade", vec![OscType::Float(v)]), true)
+                (msg("/vo/fade", vec![OscType::Float(v)]), true, true)
             }
             Cmd::Master(v) => {
                 s.master = v;
                 e.show_master(&s);
-                (msg("/vo/master", vec![OscType::Float(v)]), false)
+                (msg("/vo/master", vec![OscType::Float(v)]), false, true)
             }
             Cmd::Blackout(on) => {
                 s.blackout = on;
                 e.show_master(&s);
-                (msg("/vo/blackout", vec![int(on.into())]), true)
+                (msg("/vo/blackout", vec![int(on.into())]), true, true)
             }
         };
-        let status = e.status(&s);
+        let mut feedback = e.feedback(&s);
+        if push {
+            feedback.insert(0, reply.clone());
+        }
         e.persist(s, wait);
-        e.notify(&[status]);
+        e.notify(&feedback);
         Ok(vec![reply])
     }
 }

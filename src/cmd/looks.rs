@@ -65,9 +65,9 @@ impl Cmd {
                 s.set_base(look, Change::Step);
                 s.entry = None;
                 e.show(&s, s.fade_s);
-                let status = e.status(&s);
+                let feedback = e.feedback(&s);
                 e.persist(s, true);
-                e.notify(&[status]);
+                e.notify(&feedback);
                 Ok(vec![msg("/vo/look/recalled", vec![int(n as usize)])])
             }
             Cmd::Delete(n) => {

@@ -76,6 +76,8 @@ impl Command {
     }
 }
 
+pub use gallery::sizes as gallery_sizes;
+
 /// Parses and applies one message: its replies, or the sentence for `/vo/error`.
 pub fn run(e: &Arc<Engine>, m: &OscMessage, peer: &Peer) -> Result<Vec<OscMessage>, String> {
     let req = Request::new(m);

@@ -12,19 +12,31 @@ use crate::osc::args::{self, Request};
 
 pub enum Cmd {
     Add { image: String, aspects: Aspects },
-    Aspects { id: u32, aspects: Aspects },
-    Region { id: u32, region: Region },
-    Palette { id: u32 },
-    Color { id: u32, k: usize, rgb: [f32; 3] },
-    Remove { id: u32 },
+    Aspects { id: Which, aspects: Aspects },
+    Region { id: Which, region: Region },
+    Palette { id: Which },
+    Color { id: Which, k: usize, rgb: [f32; 3] },
+    Remove { id: Which },
     Clear,
     List,
 }
 
-fn id(segment: &str) -> Result<u32, String> {
+/// The objective an address names: by number, or `last`, the newest one (a tablet button
+/// cannot know the number the daemon gave the objective it just added).
+#[derive(Clone, Copy)]
+pub enum Which {
+    Id(u32),
+    Last,
+}
+
+fn id(segment: &str) -> Result<Which, String> {
+    if segment == "last" {
+        return Ok(Which::Last);
+    }
     segment
         .parse::<u32>()
-        .map_err(|_| format!("objective `{segment}` is not an objective number"))
+        .map(Which::Id)
+        .map_err(|_| format!("objective `{segment}` is not an objective number (or `last`)"))
 }
 
 fn aspects(req: &Request, i: usize) -> Result<Aspects, String> {
@@ -94,9 +106,9 @@ impl Cmd {
                 s.next_id += 1;
                 let st = objective.analysis.stats;
                 s.objectives.push(Entry { id, objective });
-                let status = e.status(&s);
+                let feedback = e.feedback(&s);
                 e.persist(s, true);
-                e.notify(&[status]);
+                e.notify(&feedback);
                 Ok(vec![msg(
                     "/vo/objective/added",
                     vec![
@@ -110,7 +122,7 @@ impl Cmd {
             }
             Cmd::Aspects { id, aspects } => {
                 let mut s = e.session();
-                let i = find(&s, id)?;
+                let (i, id) = find(&s, id)?;
                 s.objectives[i].objective.aspects = aspects;
                 e.persist(s, true);
                 Ok(vec![msg(
@@ -127,7 +139,7 @@ impl Cmd {
                     .filter(|&&on| on)
                     .count();
                 let mut s = e.session();
-                let i = find(&s, id)?;
+                let (i, id) = find(&s, id)?;
                 s.objectives[i].objective.region = region;
                 e.persist(s, true);
                 Ok(vec![msg(
@@ -144,12 +156,12 @@ impl Cmd {
             }
             Cmd::Palette { id } => {
                 let s = e.session();
-                let i = find(&s, id)?;
+                let (i, id) = find(&s, id)?;
                 Ok(vec![palette(id, &s.objectives[i].objective)])
             }
             Cmd::Color { id, k, rgb } => {
                 let mut s = e.session();
-                let i = find(&s, id)?;
+                let (i, id) = find(&s, id)?;
                 let colors = &mut s.objectives[i].objective.analysis.palette;
                 let n = colors.len();
                 let c = colors.get_mut(k - 1).ok_or_else(|| {
@@ -162,20 +174,20 @@ impl Cmd {
             }
             Cmd::Remove { id } => {
                 let mut s = e.session();
-                let i = find(&s, id)?;
+                let (i, id) = find(&s, id)?;
                 s.objectives.remove(i);
-                let status = e.status(&s);
+                let feedback = e.feedback(&s);
                 e.persist(s, true);
-                e.notify(&[status]);
+                e.notify(&feedback);
                 Ok(vec![msg("/vo/objective/removed", vec![int(id as usize)])])
             }
             Cmd::Clear => {
                 let mut s = e.session();
                 let n = s.objectives.len();
                 s.objectives.clear();
-                let status = e.status(&s);
+                let feedback = e.feedback(&s);
                 e.persist(s, true);
-                e.notify(&[status]);
+                e.notify(&feedback);
                 Ok(vec![msg("/vo/objective/cleared", vec![int(n)])])
             }
             Cmd::List => Ok(list(&e.session())),
@@ -208,8 +220,16 @@ pub fn list(s: &crate::engine::session::Session) -> Vec<OscMessage> {
     out
 }
 
-fn find(s: &crate::engine::session::Session, id: u32) -> Result<usize, String> {
-    s.objective_index(id).ok_or_else(|| {
+/// The index and number of the objective `which` names.
+fn find(s: &crate::engine::session::Session, which: Which) -> Result<(usize, u32), String> {
+    let id =
+        match which {
+            Which::Id(id) => id,
+            Which::Last => s.objectives.last().map(|e| e.id).ok_or(
+                "there are no objectives: add one with /vo/objective/add first".to_string(),
+            )?,
+        };
+    s.objective_index(id).map(|i| (i, id)).ok_or_else(|| {
         let ids: Vec<String> = s.objectives.iter().map(|e| e.id.to_string()).collect();
         if ids.is_empty() {
             format!("objective {id} does not exist: there are no objectives")

@@ -45,11 +45,11 @@ impl Cmd {
                 // The whole state goes where the pushes will go, so a tablet that
                 // listens on another port than it sends from is complete at once.
                 let s = e.session();
-                let mut state = vec![e.status(&s)];
+                let mut state = Vec::new();
                 if let Some((k, m)) = s.entry {
                     state.push(msg("/vo/picked", vec![int(k), int(m)]));
                 }
-                state.push(super::gallery::sizes(&s));
+                state.extend(e.feedback(&s));
                 state.extend(super::objective::list(&s));
                 state.extend(super::looks::list(&s));
                 drop(s);

@@ -11,7 +11,7 @@ pub mod session;
 
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
 use std::time::{Duration, Instant};
 
@@ -52,6 +52,11 @@ pub struct Engine {
     output: Mutex<Option<Output>>,
     session: Mutex<Session>,
     generating: AtomicBool,
+    /// Generates started in this run (the gallery serial of the next one, minus one).
+    generates: AtomicU64,
+    /// How many `/vo/entry/<k>/lit` were last pushed, so a smaller gallery turns the
+    /// buttons past its end off.
+    lit_span: AtomicUsize,
     files: Files,
     writer: Writer,
     subscribers: Mutex<Vec<Subscriber>>,
@@ -82,6 +87,8 @@ impl Engine {
             output: Mutex::new(Some(output)),
             session: Mutex::new(session),
             generating: AtomicBool::new(false),
+            generates: AtomicU64::new(0),
+            lit_span: AtomicUsize::new(0),
             writer: Writer::start(files.clone())?,
             files,
             subscribers: Mutex::new(Vec::new()),
@@ -147,6 +154,11 @@ impl Engine {
         }
     }
 
+    /// The references folder (objective images are read from it, and only from it).
+    pub fn references(&self) -> &Path {
+        &self.references
+    }
+
     /// Reads and analyses a reference image from the references folder, refusing paths
     /// that lead outside it (absolute paths, `..`, links).
     pub fn load_reference(
@@ -189,13 +201,16 @@ impl Engine {
         } else {
             s.seed
         };
+        let serial = self.generates.fetch_add(1, Ordering::SeqCst) + 1;
+        let mut started_msgs = vec![msg("/vo/progress", vec![OscType::Float(0.0)])];
+        started_msgs.extend(self.feedback(&s));
         drop(s);
         let engine = Arc::clone(self);
         let peer = peer.clone();
         let spawned = std::thread::Builder::new()
             .name("generate".into())
             .spawn(move || {
-                engine.notify(&[msg("/vo/progress", vec![OscType::Float(0.0)])]);
+                engine.notify(&started_msgs);
                 let started = Instant::now();
                 let generation = engine.stage.generate(
                     &GenerateRequest {
@@ -226,17 +241,21 @@ impl Engine {
                     ],
                 );
                 let mut s = engine.session();
-                s.gallery = Some(Gallery { generation, seed });
+                s.gallery = Some(Gallery {
+                    generation,
+                    seed,
+                    serial,
+                });
                 s.entry = None;
-                let status = engine.status(&s);
-                drop(s);
                 engine.generating.store(false, Ordering::SeqCst);
-                peer.reply(std::slice::from_ref(&reply));
-                engine.notify(&[
+                let mut pushes = vec![
                     msg("/vo/progress", vec![OscType::Float(1.0)]),
-                    reply,
-                    status,
-                ]);
+                    reply.clone(),
+                ];
+                pushes.extend(engine.feedback(&s));
+                drop(s);
+                peer.reply(std::slice::from_ref(&reply));
+                engine.notify(&pushes);
             });
         if let Err(e) = spawned {
             self.generating.store(false, Ordering::SeqCst);
@@ -299,6 +318,56 @@ impl Engine {
                 OscType::Float(s.master),
             ],
         )
+    }
+
+    /// What a tablet shows of `s`, pushed to subscribers on every change so buttons and
+    /// labels follow without scripts: `/vo/status`, the one-line `/vo/status/text`, the
+    /// gallery sizes, and `/vo/entry/<k>/lit 0|1` for every entry (and for entries of a
+    /// larger earlier gallery, turned off).
+    pub fn feedback(&self, s: &Session) -> Vec<OscMessage> {
+        let entries = s.gallery.as_ref().map_or(0, Gallery::len);
+        let span = entries.max(self.lit_span.swap(entries, Ordering::SeqCst));
+        let live = s.entry.map_or(0, |(k, _)| k);
+        let mut out = vec![
+            self.status(s),
+            msg(
+                "/vo/status/text",
+                vec![OscType::String(self.status_text(s))],
+            ),
+            crate::cmd::gallery_sizes(s),
+        ];
+        out.extend((1..=span).map(|k| {
+            msg(
+                &format!("/vo/entry/{k}/lit"),
+                vec![OscType::Int(i32::from(k == live))],
+            )
+        }));
+        out
+    }
+
+    /// One line a person reads on a tablet or the web page: what is live, how big the
+    /// gallery is, what is running.
+    pub fn status_text(&self, s: &Session) -> String {
+        let mut parts = Vec::new();
+        if s.blackout {
+            parts.push("BLACKOUT".to_string());
+        }
+        if self.is_generating() {
+            parts.push("generating...".to_string());
+        }
+        parts.push(match (&s.gallery, s.entry) {
+            (None, _) => "no gallery yet".to_string(),
+            (Some(g), Some((k, 1))) => format!("entry {k} of {} live", g.len()),
+            (Some(g), Some((k, m))) => format!("entry {k}.{m} of {} live", g.len()),
+            (Some(g), None) => format!("{} entries", g.len()),
+        });
+        let n = s.objectives.len();
+        parts.push(format!("{n} objective{}", if n == 1 { "" } else { "s" }));
+        parts.push(format!("fade {} s", s.fade_s));
+        if s.master < 1.0 {
+            parts.push(format!("master {:.0}%", s.master * 100.0));
+        }
+        parts.join(", ")
     }
 
     /// Adds or renews a subscription from `peer`, pushing to its address at `port`.

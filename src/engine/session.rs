@@ -29,6 +29,9 @@ pub struct Gallery {
     pub generation: Generation,
     /// The seed it was drawn with.
     pub seed: u64,
+    /// Which generate of this run made it (1, 2, ...): caches of its renders (the web
+    /// gallery's thumbnails) are keyed by it.
+    pub serial: u64,
 }
 
 impl Gallery {

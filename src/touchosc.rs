@@ -1,0 +1,616 @@
+//! The booth tablet's TouchOSC (Mk2) layout, generated from the address space so that it is
+//! regenerated, never hand-edited, when addresses change: `visobjd touchosc --out FILE`.
+//!
+//! A `.tosc` file is zlib-compressed XML: `<lexml version='3'>` holding one root `GROUP`
+//! node; every node has `<properties>` (name, frame, colour, ...), `<values>` (`x`, `touch`,
+//! a label's `text`), `<messages>` (`<osc>` with triggers, a path and arguments made of
+//! `<partial>`s) and `<children>`. Three pages: objectives, gallery, looks (README,
+//! "TouchOSC").
+
+use std::fmt::Write as _;
+use std::io::Write as _;
+use std::path::Path;
+
+/// Gallery entry buttons on the gallery page (`/vo/pick 1` ... `/vo/pick 12`).
+pub const ENTRY_BUTTONS: usize = 12;
+/// Saved-look slots on the looks page (save and recall 1 ... 16).
+pub const LOOK_SLOTS: usize = 16;
+/// Reference-image buttons on the objectives page, at most.
+pub const MAX_REFERENCES: usize = 12;
+
+/// The layout's size: a 4:3 tablet in landscape.
+const WIDTH: i32 = 1024;
+const HEIGHT: i32 = 768;
+/// Height of the pager's tab bar.
+const TABS: i32 = 48;
+
+type Rgba = [f32; 4];
+const BACKGROUND: Rgba = [0.08, 0.08, 0.09, 1.0];
+const TEXT: Rgba = [0.92, 0.92, 0.92, 1.0];
+const ACCENT: Rgba = [1.0, 0.62, 0.2, 1.0];
+const ENTRY: Rgba = [0.35, 0.75, 1.0, 1.0];
+const NEUTRAL: Rgba = [0.55, 0.55, 0.6, 1.0];
+const DANGER: Rgba = [0.95, 0.25, 0.25, 1.0];
+const LOOK: Rgba = [0.45, 0.9, 0.5, 1.0];
+
+/// One `<partial>`: a constant or a value of the control, converted and scaled.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Partial {
+    /// `CONSTANT` or `VALUE`.
+    pub kind: &'static str,
+    /// `INTEGER`, `FLOAT` or `STRING`.
+    pub conversion: &'static str,
+    /// The constant, or the value's key (`x`, `y`, `text`).
+    pub value: String,
+    /// Scaling of a value: 0..1 maps to `scale.0`..`scale.1`.
+    pub scale: (f32, f32),
+}
+
+impl Partial {
+    fn constant_str(s: &str) -> Partial {
+        Partial {
+            kind: "CONSTANT",
+            conversion: "STRING",
+            value: s.to_string(),
+            scale: (0.0, 1.0),
+        }
+    }
+
+    fn constant_int(i: usize) -> Partial {
+        Partial {
+            kind: "CONSTANT",
+            conversion: "INTEGER",
+            value: i.to_string(),
+            scale: (0.0, 1.0),
+        }
+    }
+
+    fn value(key: &str, conversion: &'static str, scale: (f32, f32)) -> Partial {
+        Partial {
+            kind: "VALUE",
+            conversion,
+            value: key.to_string(),
+            scale,
+        }
+    }
+}
+
+/// One `<osc>` message of a control.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Message {
+    /// The address (one constant path partial).
+    pub path: String,
+    /// Sent when the control changes.
+    pub send: bool,
+    /// Sets the control when the daemon sends this address (feedback).
+    pub receive: bool,
+    /// Which value triggers a send and on what: (`x`, `RISE`), (`x`, `ANY`), ...
+    pub trigger: (&'static str, &'static str),
+    /// The arguments.
+    pub arguments: Vec<Partial>,
+}
+
+impl Message {
+    /// A button press: `path args...` on touch-down, nothing on release (osc.md buttons).
+    fn press(path: &str, arguments: Vec<Partial>) -> Message {
+        Message {
+            path: path.to_string(),
+            send: true,
+            receive: false,
+            trigger: ("x", "RISE"),
+            arguments,
+        }
+    }
+
+    /// A continuous control: every change sends the value; the daemon's echo moves it.
+    fn value(path: &str, arguments: Vec<Partial>) -> Message {
+        Message {
+            path: path.to_string(),
+            send: true,
+            receive: true,
+            trigger: ("x", "ANY"),
+            arguments,
+        }
+    }
+
+    /// Feedback only: the daemon's push sets the control's value `key`.
+    fn listen(path: &str, key: &str, conversion: &'static str) -> Message {
+        Message {
+            path: path.to_string(),
+            send: false,
+            receive: true,
+            trigger: ("x", "ANY"),
+            arguments: vec![Partial::value(key, conversion, (0.0, 1.0))],
+        }
+    }
+}
+
+/// A control node.
+struct Node {
+    kind: &'static str,
+    name: String,
+    frame: [i32; 4],
+    color: Rgba,
+    /// Extra properties: (type letter, key, value text).
+    props: Vec<(char, &'static str, String)>,
+    /// Values: (key, default text).
+    values: Vec<(&'static str, String)>,
+    messages: Vec<Message>,
+    children: Vec<Node>,
+}
+
+impl Node {
+    fn new(kind: &'static str, name: &str, frame: [i32; 4], color: Rgba) -> Node {
+        Node {
+            kind,
+            name: name.to_string(),
+            frame,
+            color,
+            props: Vec::new(),
+            values: vec![("touch", "false".into())],
+            messages: Vec::new(),
+            children: Vec::new(),
+        }
+    }
+
+    fn group(name: &str, frame: [i32; 4], children: Vec<Node>) -> Node {
+        let mut g = Node::new("GROUP", name, frame, BACKGROUND);
+        g.props.push(('b', "interactive", "0".into()));
+        g.children = children;
+        g
+    }
+}
+
+/// A label (not touchable, so a button under it still gets the touch).
+fn label(name: &str, text: &str, frame: [i32; 4], size: i32) -> Node {
+    let mut l = Node::new("LABEL", name, frame, [0.0, 0.0, 0.0, 0.0]);
+    l.props.extend([
+        ('b', "interactive", "0".into()),
+        ('b', "background", "0".into()),
+        ('b', "outline", "0".into()),
+        ('i', "textSize", size.to_string()),
+        ('c', "textColor", color_text(TEXT)),
+    ]);
+    l.values.push(("text", text.to_string()));
+    l
+}
+
+/// A label whose text the daemon sets (`path` with one argument).
+fn readout(name: &str, path: &str, text: &str, frame: [i32; 4], size: i32) -> Node {
+    let mut l = label(name, text, frame, size);
+    l.messages.push(Message::listen(path, "text", "STRING"));
+    l
+}
+
+/// A button with its caption on top: returns the button and the caption label.
+fn button(
+    name: &str,
+    caption: &str,
+    frame: [i32; 4],
+    color: Rgba,
+    messages: Vec<Message>,
+) -> [Node; 2] {
+    let mut b = Node::new("BUTTON", name, frame, color);
+    b.props.push(('i', "buttonType", "0".into()));
+    b.values.push(("x", "0".into()));
+    b.messages = messages;
+    let caption = label(&format!("{name}_caption"), caption, frame, 18);
+    [b, caption]
+}
+
+fn fader(name: &str, frame: [i32; 4], color: Rgba, default: f32, messages: Vec<Message>) -> Node {
+    let mut f = Node::new("FADER", name, frame, color);
+    f.values.push(("x", default.to_string()));
+    f.messages = messages;
+    f
+}
+
+/// The objectives page: a button per reference image, aspect buttons and the region pad,
+/// all acting on the newest objective (`/vo/objective/last/...`).
+fn objectives_page(references: &[String]) -> Node {
+    let mut c = vec![label(
+        "objectives_title",
+        "Reference images (tap to add as an objective)",
+        [16, 8, 640, 32],
+        18,
+    )];
+    for (i, image) in references.iter().take(MAX_REFERENCES).enumerate() {
+        let (col, row) = ((i % 4) as i32, (i / 4) as i32);
+        let stem = image.rsplit_once('.').map_or(image.as_str(), |(s, _)| s);
+        c.extend(button(
+            &format!("ref_{stem}"),
+            stem,
+            [16 + col * 156, 48 + row * 84, 144, 72],
+            ACCENT,
+            vec![Message::press(
+                "/vo/objective/add",
+                vec![Partial::constant_str(image)],
+            )],
+        ));
+    }
+    c.push(label(
+        "aspects_title",
+        "Newest objective takes",
+        [16, 316, 400, 32],
+        18,
+    ));
+    for (i, aspect) in ["intensity", "color", "both"].into_iter().enumerate() {
+        c.extend(button(
+            &format!("aspects_{aspect}"),
+            aspect,
+            [16 + i as i32 * 156, 352, 144, 72],
+            NEUTRAL,
+            vec![Message::press(
+                "/vo/objective/last/aspects",
+                vec![Partial::constant_str(aspect)],
+            )],
+        ));
+    }
+    c.extend(button(
+        "objectives_clear",
+        "clear all",
+        [16, 452, 144, 72],
+        DANGER,
+        vec![Message::press("/vo/objective/clear", Vec::new())],
+    ));
+    c.push(label(
+        "region_title",
+        "Region: drag to aim it at half the stage",
+        [660, 8, 348, 32],
+        16,
+    ));
+    // A half-stage window whose top-left follows the pad: x0 = x/2, x1 = x0 + 1/2. The pad's
+    // y grows upwards and image y downwards, hence the reversed scales.
+    let mut pad = Node::new("XY", "region", [660, 48, 348, 348], ENTRY);
+    pad.values
+        .extend([("x", "0.5".into()), ("y", "0.5".into())]);
+    pad.messages.push(Message {
+        path: "/vo/objective/last/region".into(),
+        send: true,
+        receive: false,
+        trigger: ("x", "ANY"),
+        arguments: vec![
+            Partial::value("x", "FLOAT", (0.0, 0.5)),
+            Partial::value("y", "FLOAT", (0.5, 0.0)),
+            Partial::value("x", "FLOAT", (0.5, 1.0)),
+            Partial::value("y", "FLOAT", (1.0, 0.5)),
+        ],
+    });
+    c.push(pad);
+    c.extend(button(
+        "region_whole",
+        "whole stage",
+        [660, 412, 348, 72],
+        NEUTRAL,
+        vec![Message::press("/vo/objective/last/region", Vec::new())],
+    ));
+    c.push(status_line());
+    page("objectives", "Objectives", c)
+}
+
+/// The gallery page: generate, the entries (lit while live), stepping, history, fade,
+/// master, blackout, progress and what the daemon says.
+fn gallery_page() -> Node {
+    let mut c = Vec::new();
+    c.extend(button(
+        "generate",
+        "GENERATE",
+        [16, 8, 232, 72],
+        ACCENT,
+        vec![Message::press("/vo/generate", Vec::new())],
+    ));
+    let mut progress = fader(
+        "progress",
+        [264, 8, 300, 32],
+        ACCENT,
+        0.0,
+        vec![Message::listen("/vo/progress", "x", "FLOAT")],
+    );
+    progress.props.extend([
+        ('b', "interactive", "0".into()),
+        ('i', "orientation", "1".into()),
+    ]);
+    c.push(progress);
+    c.push(label("entries_title", "entries:", [264, 44, 90, 36], 16));
+    c.push(readout(
+        "entries",
+        "/vo/gallery",
+        "0",
+        [354, 44, 60, 36],
+        18,
+    ));
+    c.extend(button(
+        "sync",
+        "sync",
+        [432, 44, 132, 36],
+        NEUTRAL,
+        vec![Message::press("/vo/subscribe", Vec::new())],
+    ));
+    for k in 1..=ENTRY_BUTTONS {
+        let i = (k - 1) as i32;
+        let (col, row) = (i % 4, i / 4);
+        let mut pick = Message::press("/vo/pick", vec![Partial::constant_int(k)]);
+        // On release: the push that lights the live entry arrives after it and stays.
+        pick.trigger = ("x", "FALL");
+        c.extend(button(
+            &format!("entry_{k}"),
+            &k.to_string(),
+            [16 + col * 140, 96 + row * 124, 128, 112],
+            ENTRY,
+            vec![
+                pick,
+                Message::listen(&format!("/vo/entry/{k}/lit"), "x", "INTEGER"),
+            ],
+        ));
+    }
+    for (i, (name, path)) in [
+        ("prev", "/vo/prev"),
+        ("next", "/vo/next"),
+        ("undo", "/vo/undo"),
+        ("redo", "/vo/redo"),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        c.extend(button(
+            name,
+            name,
+            [16 + i as i32 * 140, 476, 128, 72],
+            NEUTRAL,
+            vec![Message::press(path, Vec::new())],
+        ));
+    }
+    c.push(label("fade_title", "fade 0-10 s", [600, 8, 120, 32], 16));
+    c.push(fader(
+        "fade",
+        [600, 44, 120, 504],
+        ACCENT,
+        0.2,
+        vec![Message::value(
+            "/vo/fade",
+            vec![Partial::value("x", "FLOAT", (0.0, 10.0))],
+        )],
+    ));
+    c.push(label("master_title", "master", [740, 8, 120, 32], 16));
+    c.push(fader(
+        "master",
+        [740, 44, 120, 504],
+        TEXT,
+        1.0,
+        vec![Message::value(
+            "/vo/master",
+            vec![Partial::value("x", "FLOAT", (0.0, 1.0))],
+        )],
+    ));
+    let [mut blackout, caption] = button(
+        "blackout",
+        "BLACKOUT",
+        [880, 44, 128, 504],
+        DANGER,
+        vec![Message::value(
+            "/vo/blackout",
+            vec![Partial::value("x", "INTEGER", (0.0, 1.0))],
+        )],
+    );
+    // A toggle: on and off are both sent; the daemon's push keeps tablets in step.
+    blackout.props.retain(|p| p.1 != "buttonType");
+    blackout.props.push(('i', "buttonType", "1".into()));
+    c.extend([blackout, caption]);
+    c.push(status_line());
+    page("gallery", "Gallery", c)
+}
+
+/// The looks page: save the live look to a slot, recall a slot.
+fn looks_page() -> Node {
+    let mut c = vec![
+        label("save_title", "Save the stage as look", [16, 8, 480, 32], 18),
+        label("recall_title", "Recall look", [528, 8, 480, 32], 18),
+    ];
+    for n in 1..=LOOK_SLOTS {
+        let i = (n - 1) as i32;
+        let (col, row) = (i % 4, i / 4);
+        c.extend(button(
+            &format!("save_{n}"),
+            &format!("save {n}"),
+            [16 + col * 120, 48 + row * 116, 108, 104],
+            ACCENT,
+            vec![Message::press(
+                "/vo/look/save",
+                vec![Partial::constant_int(n)],
+            )],
+        ));
+        c.extend(button(
+            &format!("recall_{n}"),
+            &n.to_string(),
+            [528 + col * 120, 48 + row * 116, 108, 104],
+            LOOK,
+            vec![Message::press(
+                "/vo/look/recall",
+                vec![Partial::constant_int(n)],
+            )],
+        ));
+    }
+    c.push(status_line());
+    page("looks", "Looks", c)
+}
+
+/// The daemon's one-line status at the foot of a page.
+fn status_line() -> Node {
+    readout(
+        "status",
+        "/vo/status/text",
+        "tap sync on the gallery page",
+        [16, HEIGHT - TABS - 64, WIDTH - 32, 48],
+        18,
+    )
+}
+
+fn page(name: &str, tab: &str, children: Vec<Node>) -> Node {
+    let mut g = Node::group(name, [0, TABS, WIDTH, HEIGHT - TABS], children);
+    g.props.push(('s', "tabLabel", tab.to_string()));
+    g
+}
+
+/// The whole layout's XML; `references` are the image names the objectives page offers.
+pub fn layout_xml(references: &[String]) -> String {
+    let mut pager = Node::new("PAGER", "pages", [0, 0, WIDTH, HEIGHT], BACKGROUND);
+    pager.props.extend([
+        ('b', "tabbar", "1".into()),
+        ('i', "tabbarSize", TABS.to_string()),
+    ]);
+    pager.values.push(("page", "1".into()));
+    pager.children = vec![objectives_page(references), gallery_page(), looks_page()];
+    let root = Node::group("visobjd", [0, 0, WIDTH, HEIGHT], vec![pager]);
+    let mut out = String::from("<?xml version='1.0' encoding='UTF-8'?><lexml version='3'>");
+    let mut ids = 0u32;
+    write_node(&mut out, &root, &mut ids);
+    out.push_str("</lexml>");
+    out
+}
+
+/// The layout, zlib-compressed as TouchOSC reads it.
+pub fn layout_tosc(references: &[String]) -> std::io::Result<Vec<u8>> {
+    let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::default());
+    z.write_all(layout_xml(references).as_bytes())?;
+    z.finish()
+}
+
+/// The image files in `dir` (by extension), sorted by name.
+pub fn reference_images(dir: &Path) -> std::io::Result<Vec<String>> {
+    let mut names: Vec<String> = std::fs::read_dir(dir)?
+        .filter_map(Result::ok)
+        .filter(|e| e.path().is_file())
+        .filter_map(|e| e.file_name().into_string().ok())
+        .filter(|n| {
+            let lower = n.to_lowercase();
+            [".png", ".jpg", ".jpeg"].iter().any(|x| lower.ends_with(x))
+        })
+        .collect();
+    names.sort();
+    Ok(names)
+}
+
+fn color_text(c: Rgba) -> String {
+    format!(
+        "<r>{}</r><g>{}</g><b>{}</b><a>{}</a>",
+        c[0], c[1], c[2], c[3]
+    )
+}
+
+/// Text inside CDATA (a `]]>` in it is split across two sections).
+fn cdata(s: &str) -> String {
+    format!("<![CDATA[{}]]>", s.replace("]]>", "]]]]><![CDATA[>"))
+}
+
+fn write_node(out: &mut String, n: &Node, ids: &mut u32) {
+    // Stable IDs in UUID form, so regenerating gives the same file.
+    *ids += 1;
+    let _ = write!(
+        out,
+        "<node ID='00000000-0000-4000-8000-{:012x}' type='{}'><properties>",
+        *ids, n.kind
+    );
+    let mut props: Vec<(char, &str, String)> = vec![
+        ('s', "name", n.name.clone()),
+        (
+            'r',
+            "frame",
+            format!(
+                "<x>{}</x><y>{}</y><w>{}</w><h>{}</h>",
+                n.frame[0], n.frame[1], n.frame[2], n.frame[3]
+            ),
+        ),
+        ('c', "color", color_text(n.color)),
+        ('b', "visible", "1".into()),
+        ('b', "locked", "0".into()),
+    ];
+    for p in &n.props {
+        props.retain(|q| q.1 != p.1);
+        props.push(p.clone());
+    }
+    props.sort_by(|a, b| a.1.cmp(b.1));
+    for (t, key, value) in props {
+        let value = match t {
+            's' => cdata(&value),
+            _ => value,
+        };
+        let _ = write!(
+            out,
+            "<property type='{t}'><key>{}</key><value>{value}</value></property>",
+            cdata(key)
+        );
+    }
+    out.push_str("</properties><values>");
+    for (key, default) in &n.values {
+        let _ = write!(
+            out,
+            "<value><key>{}</key><locked>0</locked><lockedDefaultCurrent>0</lockedDefaultCurrent><default>{}</default><defaultPull>0</defaultPull></value>",
+            cdata(key),
+            cdata(default)
+        );
+    }
+    out.push_str("</values>");
+    if !n.messages.is_empty() {
+        out.push_str("<messages>");
+        for m in &n.messages {
+            let _ = write!(
+                out,
+                "<osc><enabled>1</enabled><send>{}</send><receive>{}</receive><feedback>0</feedback><connections>00001</connections><triggers><trigger><var>{}</var><condition>{}</condition></trigger></triggers><path>",
+                u8::from(m.send),
+                u8::from(m.receive),
+                m.trigger.0,
+                m.trigger.1
+            );
+            write_partial(out, &Partial::constant_str(&m.path));
+            out.push_str("</path><arguments>");
+            for a in &m.arguments {
+                write_partial(out, a);
+            }
+            out.push_str("</arguments></osc>");
+        }
+        out.push_str("</messages>");
+    }
+    if !n.children.is_empty() {
+        out.push_str("<children>");
+        for c in &n.children {
+            write_node(out, c, ids);
+        }
+        out.push_str("</children>");
+    }
+    out.push_str("</node>");
+}
+
+fn write_partial(out: &mut String, p: &Partial) {
+    let _ = write!(
+        out,
+        "<partial><type>{}</type><conversion>{}</conversion><value>{}</value><scaleMin>{}</scaleMin><scaleMax>{}</scaleMax></partial>",
+        p.kind,
+        p.conversion,
+        cdata(&p.value),
+        p.scale.0,
+        p.scale.1
+    );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn regenerating_gives_the_same_layout() {
+        let refs = vec!["sunset.png".to_string(), "noir.png".to_string()];
+        assert_eq!(layout_xml(&refs), layout_xml(&refs));
+        let xml = layout_xml(&refs);
+        assert!(xml.starts_with("<?xml version='1.0' encoding='UTF-8'?><lexml version='3'><node "));
+        assert!(xml.contains("<![CDATA[sunset.png]]>"));
+        assert_eq!(
+            xml.matches("type='BUTTON'").count(),
+            2 + 3 + 2 + 1 + 1 + ENTRY_BUTTONS + 4 + 1 + 2 * LOOK_SLOTS
+        );
+    }
+
+    #[test]
+    fn cdata_survives_its_terminator() {
+        assert_eq!(cdata("a]]>b"), "<![CDATA[a]]]]><![CDATA[>b]]>");
+    }
+}
