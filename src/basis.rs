@@ -3,14 +3,37 @@
 
 use std::path::Path;
 
+use half::f16;
 use rayon::prelude::*;
+
+use crate::render::STRIP;
 
 use crate::scene::{Scene, SceneError};
 
-/// All lights' basis images at one resolution, planar: `planes[(ch * lights + l) * pixels + p]`.
+/// How basis samples are stored.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Precision {
+    /// IEEE half floats: half the memory and memory traffic; relative error <= 2^-11 per
+    /// sample, far below what 8-bit output or Delta-E distances resolve.
+    Half,
+    /// 32-bit floats: exact, for what measures basis images (targeting) and for HDR values
+    /// beyond half-float range.
+    Single,
+}
+
+#[derive(Debug, Clone)]
+enum Samples {
+    Half(Vec<f16>),
+    Single(Vec<f32>),
+}
+
+/// All lights' basis images at one resolution, packed for the compositor: the image is cut
+/// into strips of [`STRIP`] pixels, and each strip holds, per channel and light, that
+/// light's [`STRIP`] samples (zero past the last pixel).
 ///
-/// Planar per channel makes a render a matrix product (candidates x lights) x (lights x
-/// pixels) per channel, which is what the batched compositor computes.
+/// A render is a matrix product (candidates x lights) x (lights x pixels) per channel; this
+/// layout makes every strip's (lights x pixels) panel one contiguous block, so the
+/// compositor streams the basis from memory once, sequentially, with no gather.
 #[derive(Debug, Clone)]
 pub struct BasisImages {
     /// Width in pixels.
@@ -19,40 +42,171 @@ pub struct BasisImages {
     pub height: usize,
     /// Number of lights.
     pub lights: usize,
-    /// The samples, channel-major then light then pixel.
-    pub planes: Vec<f32>,
+    samples: Samples,
+}
+
+/// One strip's panel as stored: `[channel][light][STRIP]`.
+pub enum Panel<'a> {
+    /// Half floats (converted by the compositor).
+    Half(&'a [f16]),
+    /// 32-bit floats (used in place).
+    Single(&'a [f32]),
+}
+
+/// One light's rows of one image, in strip then channel order, to be filled at load.
+enum Rows<'a> {
+    Half(Vec<&'a mut [f16]>),
+    Single(Vec<&'a mut [f32]>),
+}
+
+impl Rows<'_> {
+    /// Fills the rows from planar `[R, G, B]` images; true if a sample exceeded the storage
+    /// range (half floats: 65504).
+    fn fill(self, planes: &[Vec<f32>; 3]) -> bool {
+        fn put<T: Copy>(rows: Vec<&mut [T]>, planes: &[Vec<f32>; 3], conv: impl Fn(f32) -> T) {
+            for (j, row) in rows.into_iter().enumerate() {
+                let (s, ch) = (j / 3, j % 3);
+                let src = planes[ch].get(s * STRIP..).unwrap_or(&[]);
+                for (d, &v) in row.iter_mut().zip(src) {
+                    *d = conv(v);
+                }
+            }
+        }
+        match self {
+            Rows::Half(rows) => {
+                let max = f16::MAX.to_f32();
+                put(rows, planes, f16::from_f32);
+                planes.iter().flatten().any(|&v| v > max)
+            }
+            Rows::Single(rows) => {
+                put(rows, planes, |v| v);
+                false
+            }
+        }
+    }
 }
 
 impl BasisImages {
+    /// All-black images, ready to be filled.
+    fn zeroed(width: usize, height: usize, lights: usize, precision: Precision) -> BasisImages {
+        let n = (width * height).div_ceil(STRIP) * 3 * lights * STRIP;
+        BasisImages {
+            width,
+            height,
+            lights,
+            samples: match precision {
+                Precision::Half => Samples::Half(vec![f16::ZERO; n]),
+                Precision::Single => Samples::Single(vec![0.0; n]),
+            },
+        }
+    }
+
+    /// Images from planar samples (`planes[(ch * lights + l) * pixels + p]`), stored at
+    /// `precision` (saturating half floats at 65504). For tests and tools; scenes load
+    /// with [`load`].
+    pub fn from_planes(
+        width: usize,
+        height: usize,
+        lights: usize,
+        planes: &[f32],
+        precision: Precision,
+    ) -> BasisImages {
+        let pixels = width * height;
+        assert_eq!(planes.len(), 3 * lights * pixels);
+        let mut img = BasisImages::zeroed(width, height, lights, precision);
+        let lim = match precision {
+            Precision::Half => f16::MAX.to_f32(),
+            Precision::Single => f32::MAX,
+        };
+        for (l, rows) in img.rows_by_light().into_iter().enumerate() {
+            rows.fill(&std::array::from_fn(|ch| {
+                let start = (ch * lights + l) * pixels;
+                planes[start..start + pixels]
+                    .iter()
+                    .map(|&v| v.clamp(-lim, lim))
+                    .collect()
+            }));
+        }
+        img
+    }
+
+    /// Every light's rows (strip then channel order), so lights can be filled in parallel.
+    fn rows_by_light(&mut self) -> Vec<Rows<'_>> {
+        fn split<T>(data: &mut [T], lights: usize) -> Vec<Vec<&mut [T]>> {
+            let mut out: Vec<Vec<&mut [T]>> = (0..lights)
+                .map(|_| Vec::with_capacity(data.len() / STRIP / lights.max(1)))
+                .collect();
+            for (r, row) in data.chunks_mut(STRIP).enumerate() {
+                out[r % lights].push(row);
+            }
+            out
+        }
+        match &mut self.samples {
+            Samples::Half(d) => split(d, self.lights).into_iter().map(Rows::Half).collect(),
+            Samples::Single(d) => split(d, self.lights)
+                .into_iter()
+                .map(Rows::Single)
+                .collect(),
+        }
+    }
+
     /// Pixels per image.
     pub fn pixels(&self) -> usize {
         self.width * self.height
     }
 
-    /// One light's plane for one channel (0 = R, 1 = G, 2 = B).
-    pub fn plane(&self, channel: usize, light: usize) -> &[f32] {
-        let n = self.pixels();
-        let start = (channel * self.lights + light) * n;
-        &self.planes[start..start + n]
+    /// Number of [`STRIP`]-pixel strips.
+    pub fn strips(&self) -> usize {
+        self.pixels().div_ceil(STRIP)
+    }
+
+    /// How the samples are stored.
+    pub fn precision(&self) -> Precision {
+        match self.samples {
+            Samples::Half(_) => Precision::Half,
+            Samples::Single(_) => Precision::Single,
+        }
+    }
+
+    /// Strip `s`'s panel, `3 * lights * STRIP` samples.
+    pub fn panel(&self, s: usize) -> Panel<'_> {
+        let n = 3 * self.lights * STRIP;
+        match &self.samples {
+            Samples::Half(d) => Panel::Half(&d[s * n..(s + 1) * n]),
+            Samples::Single(d) => Panel::Single(&d[s * n..(s + 1) * n]),
+        }
+    }
+
+    /// One sample of light `l`, channel `ch` (0 = R, 1 = G, 2 = B), at pixel `p`, as stored.
+    fn sample(&self, ch: usize, l: usize, p: usize) -> f32 {
+        let i = ((p / STRIP * 3 + ch) * self.lights + l) * STRIP + p % STRIP;
+        match &self.samples {
+            Samples::Half(d) => d[i].to_f32(),
+            Samples::Single(d) => d[i],
+        }
+    }
+
+    /// One light's plane for one channel (0 = R, 1 = G, 2 = B), as stored: for the scalar
+    /// reference and for measuring lights, not for the compositor.
+    pub fn plane(&self, channel: usize, light: usize) -> Vec<f32> {
+        (0..self.pixels())
+            .map(|p| self.sample(channel, light, p))
+            .collect()
     }
 
     /// One light's luminance image (Rec. 709 weights on linear RGB).
     pub fn luminance(&self, light: usize) -> Vec<f32> {
-        let (r, g, b) = (
-            self.plane(0, light),
-            self.plane(1, light),
-            self.plane(2, light),
-        );
-        r.iter()
-            .zip(g)
-            .zip(b)
-            .map(|((&r, &g), &b)| crate::color::luminance([r, g, b]))
+        (0..self.pixels())
+            .map(|p| crate::color::luminance(std::array::from_fn(|ch| self.sample(ch, light, p))))
             .collect()
     }
 
     /// Bytes held.
     pub fn bytes(&self) -> usize {
-        self.planes.len() * std::mem::size_of::<f32>()
+        match &self.samples {
+            Samples::Half(d) => d.len() * std::mem::size_of::<f16>(),
+            Samples::Single(d) => d.len() * std::mem::size_of::<f32>(),
+        }
     }
 }
 
@@ -170,76 +324,93 @@ fn weights_1d(n: usize, nn: usize) -> Vec<Vec<(usize, f32)>> {
         .collect()
 }
 
-/// Loads every light's basis image and keeps it at each requested width (0 = full size).
+/// One light's basis image, validated, as planar `[R, G, B]` (negatives clamped to 0).
+fn decode(light: &crate::scene::Light) -> Result<(usize, usize, [Vec<f32>; 3]), SceneError> {
+    let fail = |message: String| SceneError::Basis {
+        path: light.basis.clone(),
+        message,
+    };
+    let img = read_exr(&light.basis).map_err(fail)?;
+    if img.pixels.iter().flatten().any(|v| !v.is_finite()) {
+        return Err(fail(
+            "contains NaN or infinite samples; re-export it with finite values".into(),
+        ));
+    }
+    let planes = std::array::from_fn(|c| img.pixels.iter().map(|p| p[c].max(0.0)).collect());
+    Ok((img.width, img.height, planes))
+}
+
+/// Loads every light's basis image and keeps it at each requested width (0 = full size)
+/// and precision.
 ///
-/// Each EXR is decoded once; the full-size image is dropped unless asked for. All images
-/// must share one size, or the scene does not load and the error names the odd file.
-pub fn load(scene: &Scene, widths: &[usize]) -> Result<Vec<BasisImages>, SceneError> {
-    // Per light: its full size and, per requested width, its three resampled planes.
-    type Scaled = ((usize, usize), Vec<[Vec<f32>; 3]>);
-    let decoded: Vec<Result<Scaled, SceneError>> = scene
-        .lights
-        .par_iter()
-        .map(|light| {
-            let fail = |message: String| SceneError::Basis {
-                path: light.basis.clone(),
-                message,
-            };
-            let img = read_exr(&light.basis).map_err(fail)?;
-            if img.pixels.iter().flatten().any(|v| !v.is_finite()) {
-                return Err(fail(
-                    "contains NaN or infinite samples; re-export it with finite values".into(),
-                ));
-            }
-            let (w, h) = (img.width, img.height);
-            let planes: [Vec<f32>; 3] =
-                std::array::from_fn(|c| img.pixels.iter().map(|p| p[c].max(0.0)).collect());
-            drop(img);
-            let scaled = widths
-                .iter()
-                .map(|&width| {
-                    let (nw, nh) = scaled_size(w, h, width);
-                    std::array::from_fn(|c| resample(&planes[c], w, h, nw, nh))
-                })
-                .collect();
-            Ok(((w, h), scaled))
+/// Each EXR is decoded once and written straight into the final packed images (no second
+/// copy of the basis ever exists, so resident memory stays close to what is kept). All
+/// images must share one size, or the scene does not load and the error names the odd
+/// file. If a sample exceeds half-float range, the scene is loaded again in single
+/// precision.
+pub fn load(scene: &Scene, widths: &[(usize, Precision)]) -> Result<Vec<BasisImages>, SceneError> {
+    let first = decode(&scene.lights[0])?;
+    let (w, h) = (first.0, first.1);
+    let lights = scene.lights.len();
+    let mut images: Vec<BasisImages> = widths
+        .iter()
+        .map(|&(width, precision)| {
+            let (nw, nh) = scaled_size(w, h, width);
+            BasisImages::zeroed(nw, nh, lights, precision)
         })
         .collect();
-    let mut lights = Vec::with_capacity(decoded.len());
-    for d in decoded {
-        lights.push(d?);
+    let mut slots: Vec<Vec<Rows>> = (0..lights).map(|_| Vec::new()).collect();
+    for img in &mut images {
+        for (slot, rows) in slots.iter_mut().zip(img.rows_by_light()) {
+            slot.push(rows);
+        }
     }
-    let (w, h) = lights[0].0;
-    if let Some(i) = lights.iter().position(|l| l.0 != (w, h)) {
-        return Err(SceneError::Basis {
-            path: scene.lights[i].basis.clone(),
-            message: format!(
-                "is {}x{} but {} is {w}x{h}; every basis image must have the same size",
-                lights[i].0.0,
-                lights[i].0.1,
-                scene.lights[0].basis.display()
-            ),
-        });
-    }
-    Ok(widths
-        .iter()
+    let first = std::sync::Mutex::new(Some(first));
+    let results: Vec<Result<bool, SceneError>> = scene
+        .lights
+        .par_iter()
+        .zip(slots)
         .enumerate()
-        .map(|(k, &width)| {
-            let (nw, nh) = scaled_size(w, h, width);
-            let mut planes = Vec::with_capacity(3 * lights.len() * nw * nh);
-            for c in 0..3 {
-                for light in &mut lights {
-                    planes.append(&mut light.1[k][c]);
-                }
+        .map(|(i, (light, slots))| {
+            let taken = if i == 0 {
+                first.lock().map_or(None, |mut f| f.take())
+            } else {
+                None
+            };
+            let (lw, lh, planes) = match taken {
+                Some(d) => d,
+                None => decode(light)?,
+            };
+            if (lw, lh) != (w, h) {
+                return Err(SceneError::Basis {
+                    path: light.basis.clone(),
+                    message: format!(
+                        "is {lw}x{lh} but {} is {w}x{h}; every basis image must have the same size",
+                        scene.lights[0].basis.display()
+                    ),
+                });
             }
-            BasisImages {
-                width: nw,
-                height: nh,
-                lights: lights.len(),
-                planes,
+            let mut overflow = false;
+            for (rows, &(width, _)) in slots.into_iter().zip(widths) {
+                let (nw, nh) = scaled_size(w, h, width);
+                let scaled = std::array::from_fn(|c| resample(&planes[c], w, h, nw, nh));
+                overflow |= rows.fill(&scaled);
             }
+            Ok(overflow)
         })
-        .collect())
+        .collect();
+    let mut overflow = false;
+    for r in results {
+        overflow |= r?;
+    }
+    if overflow {
+        let single: Vec<(usize, Precision)> = widths
+            .iter()
+            .map(|&(w, _)| (w, Precision::Single))
+            .collect();
+        return load(scene, &single);
+    }
+    Ok(images)
 }
 
 #[cfg(test)]
@@ -258,6 +429,22 @@ mod tests {
         let odd = resample(&src, 4, 3, 3, 2);
         let mean_odd: f32 = odd.iter().sum::<f32>() / 6.0;
         assert!((mean_src - mean_odd).abs() < 1e-4);
+    }
+
+    #[test]
+    fn packed_planes_read_back_as_stored() {
+        let (w, h, lights) = (100, 3, 2); // 300 pixels: four strips, the last one short
+        let planes: Vec<f32> = (0..3 * lights * w * h).map(|i| i as f32 * 0.25).collect();
+        let img = BasisImages::from_planes(w, h, lights, &planes, Precision::Single);
+        assert_eq!(img.strips(), 4);
+        for ch in 0..3 {
+            for l in 0..lights {
+                let start = (ch * lights + l) * w * h;
+                assert_eq!(img.plane(ch, l), planes[start..start + w * h]);
+            }
+        }
+        let half = BasisImages::from_planes(w, h, lights, &[1e6; 1800], Precision::Half);
+        assert_eq!(half.plane(0, 0)[0], 65504.0, "half floats saturate");
     }
 
     #[test]

@@ -5,11 +5,12 @@
 //! by the same pipeline for candidates and representatives.
 
 use rand::Rng;
+use rayon::prelude::*;
 
 use crate::basis::BasisImages;
-use crate::color::linear_to_lab;
+use crate::color::linear_to_lab_planar;
 use crate::look::Look;
-use crate::render::{composite, weights};
+use crate::render::{Kernel, STRIP, composite_with, weights, zeroed_outputs};
 use crate::sampler::Plan;
 
 /// Width of the proxy renders distances are measured on.
@@ -61,10 +62,22 @@ impl Clustering {
     /// 20 / (1 + 0.1 * rejections); otherwise it is accepted: as a new entry while fewer
     /// than `clusters` exist, else as a member of its nearest entry.
     pub fn offer(&mut self, lab: &[f32]) -> Decision {
-        let nearest = self
-            .reps
+        let distances: Vec<f32> = self.reps.iter().map(|r| mean_delta_e(r, lab)).collect();
+        self.offer_measured(lab, &distances)
+    }
+
+    /// [`Clustering::offer`] with the distances to the first representatives already
+    /// measured (`known[k]` to entry k), so a batch can measure them in parallel; the rest
+    /// are measured here.
+    fn offer_measured(&mut self, lab: &[f32], known: &[f32]) -> Decision {
+        let nearest = known
             .iter()
-            .map(|r| mean_delta_e(r, lab))
+            .copied()
+            .chain(
+                self.reps[known.len()..]
+                    .iter()
+                    .map(|r| mean_delta_e(r, lab)),
+            )
             .enumerate()
             .min_by(|a, b| a.1.total_cmp(&b.1));
         if let Some((_, d)) = nearest
@@ -106,34 +119,90 @@ impl Clustering {
     }
 }
 
-/// Mean per-pixel Delta-E 76 between two Lab images (interleaved L, a, b).
+/// Mean per-pixel Delta-E 76 between two Lab proxies from [`lab_proxies`].
+///
+/// The sum runs in 16 fixed lanes, so it vectorises and gives the same value on every CPU.
 pub fn mean_delta_e(a: &[f32], b: &[f32]) -> f32 {
-    let n = (a.len() / 3).max(1);
-    let sum: f32 = a
-        .chunks_exact(3)
-        .zip(b.chunks_exact(3))
-        .map(|(p, q)| {
-            let (dl, da, db) = (p[0] - q[0], p[1] - q[1], p[2] - q[2]);
-            (dl * dl + da * da + db * db).sqrt()
-        })
-        .sum();
-    sum / n as f32
+    #[cfg(target_arch = "x86_64")]
+    if is_x86_feature_detected!("avx512f") {
+        // SAFETY: AVX-512F was just detected.
+        return unsafe { mean_delta_e_avx512(a, b) };
+    } else if is_x86_feature_detected!("avx2") {
+        // SAFETY: AVX2 was just detected.
+        return unsafe { mean_delta_e_avx2(a, b) };
+    }
+    mean_delta_e_lanes(a, b)
 }
 
-/// Renders looks at proxy size and converts to Lab: what distances are measured on.
-pub fn lab_proxies(proxy: &BasisImages, looks: &[&Look], gain: f32) -> Vec<Vec<f32>> {
-    let w = weights(looks, gain);
-    let mut outs: Vec<Vec<f32>> = looks
-        .iter()
-        .map(|_| vec![0.0; proxy.pixels() * 3])
-        .collect();
-    composite(proxy, &w, &mut outs, |v| v.clamp(0.0, 1.0));
-    for out in &mut outs {
-        for px in out.chunks_exact_mut(3) {
-            let lab = linear_to_lab([px[0], px[1], px[2]]);
-            px.copy_from_slice(&lab);
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+fn mean_delta_e_avx512(a: &[f32], b: &[f32]) -> f32 {
+    mean_delta_e_lanes(a, b)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn mean_delta_e_avx2(a: &[f32], b: &[f32]) -> f32 {
+    mean_delta_e_lanes(a, b)
+}
+
+#[inline(always)]
+fn mean_delta_e_lanes(a: &[f32], b: &[f32]) -> f32 {
+    const LANES: usize = 16;
+    let mut lanes = [0.0f32; LANES];
+    let mut n = 0;
+    for (p, q) in a.chunks(3 * STRIP).zip(b.chunks(3 * STRIP)) {
+        let len = p.len().min(q.len()) / 3;
+        n += len;
+        let (pl, pa, pb) = (&p[..len], &p[len..2 * len], &p[2 * len..3 * len]);
+        let (ql, qa, qb) = (&q[..len], &q[len..2 * len], &q[2 * len..3 * len]);
+        let de = |pl: f32, pa: f32, pb: f32, ql: f32, qa: f32, qb: f32| {
+            let (dl, da, db) = (pl - ql, pa - qa, pb - qb);
+            (dl * dl + da * da + db * db).sqrt()
+        };
+        // Whole groups of 16 as fixed-size arrays, so the compiler sees no bounds to check.
+        let (cl, ca, cb) = (
+            pl.as_chunks::<LANES>(),
+            pa.as_chunks::<LANES>(),
+            pb.as_chunks::<LANES>(),
+        );
+        let (dl, da, db) = (
+            ql.as_chunks::<LANES>(),
+            qa.as_chunks::<LANES>(),
+            qb.as_chunks::<LANES>(),
+        );
+        for (((((x, y), z), u), v), w) in
+            cl.0.iter()
+                .zip(ca.0)
+                .zip(cb.0)
+                .zip(dl.0)
+                .zip(da.0)
+                .zip(db.0)
+        {
+            for k in 0..LANES {
+                lanes[k] += de(x[k], y[k], z[k], u[k], v[k], w[k]);
+            }
+        }
+        let tails =
+            cl.1.iter()
+                .zip(ca.1)
+                .zip(cb.1)
+                .zip(dl.1)
+                .zip(da.1)
+                .zip(db.1);
+        for ((((((x, y), z), u), v), w), lane) in tails.zip(&mut lanes) {
+            *lane += de(*x, *y, *z, *u, *v, *w);
         }
     }
+    lanes.iter().sum::<f32>() / n.max(1) as f32
+}
+
+/// Renders looks at proxy size and converts to Lab: what distances are measured on. The
+/// layout is the compositor's: per strip of [`STRIP`] pixels, the strip's L, a and b planes.
+pub fn lab_proxies(proxy: &BasisImages, looks: &[&Look], gain: f32) -> Vec<Vec<f32>> {
+    let w = weights(looks, gain);
+    let mut outs = zeroed_outputs(looks.len(), proxy.pixels() * 3);
+    composite_with(Kernel::detect(), proxy, &w, &mut outs, linear_to_lab_planar);
     outs
 }
 
@@ -150,6 +219,10 @@ pub struct Generation {
     pub draws: usize,
     /// True if the draw bound ran out before `count` candidates were accepted.
     pub exhausted: bool,
+    /// Thumbnails of the representatives, one per entry, so the gallery can be shown as
+    /// soon as it exists (filled by [`crate::stage::Stage::generate`]; members' thumbnails
+    /// are rendered on demand with [`crate::stage::Stage::thumbnails`]).
+    pub thumbnails: Vec<image::RgbImage>,
 }
 
 /// Candidates are sampled and proxied in batches of at most this many; the decisions are
@@ -178,9 +251,25 @@ pub fn generate(
         let batch: Vec<Look> = (0..want).map(|_| plan.sample(base, rng)).collect();
         let refs: Vec<&Look> = batch.iter().collect();
         let labs = lab_proxies(proxy, &refs, gain);
-        for (look, lab) in batch.into_iter().zip(labs) {
+        // Distances to every representative, measured in parallel: to those that exist now,
+        // and to each new one as soon as it appears, for the rest of the batch.
+        let reps = &clustering.reps;
+        let mut known: Vec<Vec<f32>> = labs
+            .par_iter()
+            .map(|lab| reps.iter().map(|r| mean_delta_e(r, lab)).collect())
+            .collect();
+        for (i, look) in batch.into_iter().enumerate() {
             draws += 1;
-            if clustering.offer(&lab) != Decision::Rejected {
+            let entries = clustering.entries.len();
+            let decision = clustering.offer_measured(&labs[i], &known[i]);
+            if clustering.entries.len() > entries {
+                let rep = &clustering.reps[entries];
+                known[i + 1..]
+                    .par_iter_mut()
+                    .zip(&labs[i + 1..])
+                    .for_each(|(d, lab)| d.push(mean_delta_e(rep, lab)));
+            }
+            if decision != Decision::Rejected {
                 candidates.push(look);
                 if candidates.len() == count {
                     break;
@@ -194,5 +283,6 @@ pub fn generate(
         entries: clustering.entries().to_vec(),
         threshold: clustering.threshold(),
         draws,
+        thumbnails: Vec::new(),
     }
 }

@@ -29,7 +29,7 @@ use tokio::net::{TcpListener, TcpStream};
 use tokio::sync::{Mutex, Semaphore};
 
 use crate::config::{Cidr, permits};
-use crate::engine::{Engine, EngineHandler, gallery_look, msg};
+use crate::engine::{Engine, EngineHandler, msg};
 use crate::look::Look;
 use crate::osc::{Handler, Peer};
 
@@ -369,28 +369,23 @@ async fn thumb(shared: &Shared, serial: u64, k: usize) -> Answer {
     let current = match cache.as_ref() {
         Some((s, pics)) if *s == serial => Arc::clone(pics),
         _ => {
-            let looks: Vec<Look> = {
+            // The representatives' thumbnails were rendered with the gallery.
+            let thumbs: Vec<image::RgbImage> = {
                 let s = shared.engine.session();
                 match s.gallery.as_ref() {
-                    Some(g) if g.serial == serial => (1..=g.len())
-                        .filter_map(|k| gallery_look(&s, k, 1).ok())
-                        .collect(),
+                    Some(g) if g.serial == serial => g.generation.thumbnails.clone(),
                     _ => return Answer::text(404, "that gallery was replaced by a newer one"),
                 }
             };
-            let engine = Arc::clone(&shared.engine);
             let Some(pics) = blocking(move || {
-                let refs: Vec<&Look> = looks.iter().collect();
-                engine
-                    .stage
-                    .thumbnails(&refs)
+                thumbs
                     .iter()
                     .map(|img| Arc::new(encode_jpeg(img)))
                     .collect::<Vec<_>>()
             })
             .await
             else {
-                return Answer::text(500, "the render failed");
+                return Answer::text(500, "the encoding failed");
             };
             let pics = Arc::new(pics);
             *cache = Some((serial, Arc::clone(&pics)));

@@ -1,17 +1,30 @@
 //! The CPU compositor: a look relights the basis images (paper 5.1).
 //!
 //! A render is `out[pixel] = gain * sum over lights of multiplier[light] * basis[light][pixel]`
-//! per channel. Candidates are rendered together, tile by tile, so each basis tile is
-//! read from memory once and reused from cache for every candidate.
+//! per channel, so rendering C candidates is a matrix product (C x lights) x (lights x
+//! pixels) per channel. The batched compositor cuts the pixels into strips of [`STRIP`],
+//! packs every light's strip into a contiguous L2-resident panel once, and runs a register
+//! blocked micro-kernel (4 candidates x 96 pixels) over it for every group of candidates, so
+//! the basis is read from memory once per batch and the FMA units stay busy. The kernel is
+//! picked at run time ([`Kernel::detect`]): AVX-512, AVX2+FMA, or portable code.
 
+use half::f16;
+use half::slice::HalfFloatSliceExt;
 use rayon::prelude::*;
 
-use crate::basis::BasisImages;
-use crate::color::encode_srgb8;
+use crate::basis::{BasisImages, Panel};
+use crate::color::encode_srgb8_planar;
 use crate::look::Look;
 
-/// Pixels per tile: a tile of every light's three planes stays in L2 for a few hundred lights.
-const TILE: usize = 256;
+/// Pixels per strip: six 16-lane AVX-512 vectors, the width of the register block.
+pub const STRIP: usize = 96;
+/// Candidates per register block.
+const MR: usize = 4;
+/// Strips per parallel task at most: enough work to hide rayon's overhead.
+const TASK_STRIPS: usize = 8;
+
+/// One light's strip of one channel.
+type Row = [f32; STRIP];
 
 /// Linear gain of an exposure in stops.
 pub fn exposure_gain(stops: f32) -> f32 {
@@ -31,6 +44,305 @@ pub fn weights(looks: &[&Look], gain: f32) -> Vec<Vec<[f32; 3]>> {
         .collect()
 }
 
+/// A micro-kernel implementation; all compute the same sums (FMA or not), to within 1e-4
+/// of [`render_reference`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Kernel {
+    /// Plain Rust the compiler vectorises for the baseline target: runs anywhere.
+    Portable,
+    /// 256-bit AVX2 with FMA (x86-64 from about 2013).
+    Avx2,
+    /// 512-bit AVX-512F (Zen 4, Intel server parts).
+    Avx512,
+}
+
+impl Kernel {
+    /// Every kernel, slowest first (for tests and the benchmark).
+    pub const ALL: [Kernel; 3] = [Kernel::Portable, Kernel::Avx2, Kernel::Avx512];
+
+    /// The widest kernel this CPU runs.
+    pub fn detect() -> Kernel {
+        Kernel::ALL
+            .into_iter()
+            .rev()
+            .find(|k| k.supported())
+            .unwrap_or(Kernel::Portable)
+    }
+
+    /// Whether this CPU can run the kernel.
+    pub fn supported(self) -> bool {
+        match self {
+            Kernel::Portable => true,
+            #[cfg(target_arch = "x86_64")]
+            Kernel::Avx2 => is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma"),
+            #[cfg(target_arch = "x86_64")]
+            Kernel::Avx512 => is_x86_feature_detected!("avx512f"),
+            #[cfg(not(target_arch = "x86_64"))]
+            _ => false,
+        }
+    }
+
+    /// Computes one register block: `acc[r][p] = sum over active l of w[l][r] * b[l][p]`.
+    /// While it runs, the kernel asks for the cache lines of `ahead` (the next strip's
+    /// panel), one per light, so memory streams in under the arithmetic.
+    fn block(
+        self,
+        w: &[[f32; MR]],
+        b: &[Row],
+        active: &[u32],
+        acc: &mut [[f32; STRIP]; MR],
+        ahead: Ahead,
+    ) {
+        match self {
+            #[cfg(target_arch = "x86_64")]
+            // SAFETY: `composite_with` only runs kernels whose `supported()` is true.
+            Kernel::Avx512 => unsafe { x86::block_avx512(w, b, active, acc, ahead) },
+            #[cfg(target_arch = "x86_64")]
+            // SAFETY: as above: AVX2 and FMA were detected.
+            Kernel::Avx2 => unsafe { x86::block_avx2(w, b, active, acc, ahead) },
+            _ => block_portable(w, b, active, acc),
+        }
+    }
+}
+
+/// Cache lines to prefetch: `lines` lines from `start`. A prefetch is only a hint and never
+/// faults, so the address needs no validity guarantee.
+#[derive(Clone, Copy)]
+struct Ahead {
+    start: *const u8,
+    lines: usize,
+}
+
+impl Ahead {
+    /// Asks for line `i` if there is one.
+    #[inline(always)]
+    fn touch(self, i: usize) {
+        #[cfg(target_arch = "x86_64")]
+        if i < self.lines {
+            use std::arch::x86_64::{_MM_HINT_T1, _mm_prefetch};
+            // SAFETY: prefetching is a hint with no effect on memory safety; the address
+            // (computed with wrapping arithmetic) is inside the next strip's panel anyway.
+            unsafe { _mm_prefetch::<_MM_HINT_T1>(self.start.wrapping_add(64 * i).cast()) };
+        }
+    }
+}
+
+fn block_portable(w: &[[f32; MR]], b: &[Row], active: &[u32], acc: &mut [[f32; STRIP]; MR]) {
+    for a in acc.iter_mut() {
+        a.fill(0.0);
+    }
+    for &l in active {
+        let (row, ws) = (&b[l as usize], &w[l as usize]);
+        for (a, &k) in acc.iter_mut().zip(ws) {
+            for (a, &v) in a.iter_mut().zip(row) {
+                *a += k * v;
+            }
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+mod x86 {
+    use std::arch::x86_64::*;
+
+    use half::f16;
+
+    use super::{Ahead, MR, Row, STRIP};
+
+    /// 4 candidates x 96 pixels in 24 zmm accumulators; per light 6 loads, 4 broadcasts,
+    /// 24 FMAs.
+    #[target_feature(enable = "avx512f")]
+    pub(super) fn block_avx512(
+        w: &[[f32; MR]],
+        b: &[Row],
+        active: &[u32],
+        acc: &mut [[f32; STRIP]; MR],
+        ahead: Ahead,
+    ) {
+        const V: usize = STRIP / 16;
+        let mut c = [[_mm512_setzero_ps(); V]; MR];
+        for (i, &l) in active.iter().enumerate() {
+            ahead.touch(i);
+            let (row, ws) = (&b[l as usize], &w[l as usize]);
+            let mut v = [_mm512_setzero_ps(); V];
+            for (j, v) in v.iter_mut().enumerate() {
+                // SAFETY: `row` holds STRIP = 16 * V floats; lanes 16j..16j+16 are inside.
+                *v = unsafe { _mm512_loadu_ps(row.as_ptr().add(16 * j)) };
+            }
+            for (c, &k) in c.iter_mut().zip(ws) {
+                let k = _mm512_set1_ps(k);
+                for (c, &v) in c.iter_mut().zip(&v) {
+                    *c = _mm512_fmadd_ps(k, v, *c);
+                }
+            }
+        }
+        for (a, c) in acc.iter_mut().zip(&c) {
+            for (j, &c) in c.iter().enumerate() {
+                // SAFETY: `a` holds STRIP floats; lanes 16j..16j+16 are inside.
+                unsafe { _mm512_storeu_ps(a.as_mut_ptr().add(16 * j), c) };
+            }
+        }
+    }
+
+    /// Four passes of 4 candidates x 24 pixels (12 ymm accumulators of 16 registers).
+    #[target_feature(enable = "avx2,fma")]
+    pub(super) fn block_avx2(
+        w: &[[f32; MR]],
+        b: &[Row],
+        active: &[u32],
+        acc: &mut [[f32; STRIP]; MR],
+        ahead: Ahead,
+    ) {
+        const V: usize = 3;
+        const PARTS: usize = STRIP / (8 * V);
+        for part in 0..PARTS {
+            let off = part * 8 * V;
+            let mut c = [[_mm256_setzero_ps(); V]; MR];
+            for (i, &l) in active.iter().enumerate() {
+                ahead.touch(i * PARTS + part);
+                let (row, ws) = (&b[l as usize][off..off + 8 * V], &w[l as usize]);
+                let mut v = [_mm256_setzero_ps(); V];
+                for (j, v) in v.iter_mut().enumerate() {
+                    // SAFETY: `row` holds 8 * V floats; lanes 8j..8j+8 are inside.
+                    *v = unsafe { _mm256_loadu_ps(row.as_ptr().add(8 * j)) };
+                }
+                for (c, &k) in c.iter_mut().zip(ws) {
+                    let k = _mm256_set1_ps(k);
+                    for (c, &v) in c.iter_mut().zip(&v) {
+                        *c = _mm256_fmadd_ps(k, v, *c);
+                    }
+                }
+            }
+            for (a, c) in acc.iter_mut().zip(&c) {
+                let a = &mut a[off..off + 8 * V];
+                for (j, &c) in c.iter().enumerate() {
+                    // SAFETY: `a` holds 8 * V floats; lanes 8j..8j+8 are inside.
+                    unsafe { _mm256_storeu_ps(a.as_mut_ptr().add(8 * j), c) };
+                }
+            }
+        }
+    }
+
+    /// Half to single precision, 16 lanes at a time.
+    #[target_feature(enable = "avx512f")]
+    pub(super) fn widen_avx512(src: &[f16], dst: &mut [f32]) {
+        assert_eq!(src.len(), dst.len());
+        let n = src.len() / 16 * 16;
+        for i in (0..n).step_by(16) {
+            // SAFETY: i + 16 <= n <= both lengths; `f16` is a transparent u16, so 16 of them
+            // are one unaligned 256-bit load.
+            unsafe {
+                let h = _mm256_loadu_si256(src.as_ptr().add(i).cast());
+                _mm512_storeu_ps(dst.as_mut_ptr().add(i), _mm512_cvtph_ps(h));
+            }
+        }
+        for (d, s) in dst[n..].iter_mut().zip(&src[n..]) {
+            *d = s.to_f32();
+        }
+    }
+
+    /// Where interleaved element k (pixel k / 3, channel k % 3) of output vector `j` comes
+    /// from: first from R (0..16) or G (16..32) of its pixel group, then B (16..32) is laid
+    /// over the blue slots (the others keep their lane).
+    const fn interleave_index(j: usize, blue: bool) -> [i32; 16] {
+        let mut idx = [0i32; 16];
+        let mut lane = 0;
+        while lane < 16 {
+            let k = 16 * j + lane;
+            let (p, c) = ((k / 3) as i32, k % 3);
+            idx[lane] = match (blue, c) {
+                (false, 0) => p,
+                (false, 1) => 16 + p,
+                (false, _) => 0,
+                (true, 2) => 16 + p,
+                (true, _) => lane as i32,
+            };
+            lane += 1;
+        }
+        idx
+    }
+
+    /// Clamps 16-pixel groups of planar RGB to 0..1 and interleaves them into `out`, with
+    /// two permutes per output vector; returns the pixels done (the rest is left to the
+    /// caller).
+    #[target_feature(enable = "avx512f")]
+    pub(super) fn interleave_clamped_avx512(rgb: [&[f32]; 3], out: &mut [f32]) -> usize {
+        const RG: [[i32; 16]; 3] = [
+            interleave_index(0, false),
+            interleave_index(1, false),
+            interleave_index(2, false),
+        ];
+        const B: [[i32; 16]; 3] = [
+            interleave_index(0, true),
+            interleave_index(1, true),
+            interleave_index(2, true),
+        ];
+        let n = (out.len() / 3)
+            .min(rgb[0].len())
+            .min(rgb[1].len())
+            .min(rgb[2].len());
+        let groups = n / 16;
+        let (zero, one) = (_mm512_setzero_ps(), _mm512_set1_ps(1.0));
+        for g in 0..groups {
+            let mut v = [zero; 3];
+            for (v, plane) in v.iter_mut().zip(rgb) {
+                // SAFETY: 16 * g + 16 <= n <= plane.len().
+                let x = unsafe { _mm512_loadu_ps(plane.as_ptr().add(16 * g)) };
+                // NaN would become 0 here (clamp keeps it); basis and weights are finite.
+                *v = _mm512_min_ps(_mm512_max_ps(x, zero), one);
+            }
+            for j in 0..3 {
+                // SAFETY: the index tables are compile-time constants, read by value.
+                let (rg, b) = unsafe {
+                    (
+                        _mm512_loadu_si512(RG[j].as_ptr().cast()),
+                        _mm512_loadu_si512(B[j].as_ptr().cast()),
+                    )
+                };
+                let t = _mm512_permutex2var_ps(v[0], rg, v[1]);
+                let o = _mm512_permutex2var_ps(t, b, v[2]);
+                // SAFETY: 48 * g + 16 * j + 16 <= 3 * n <= out.len().
+                unsafe { _mm512_storeu_ps(out.as_mut_ptr().add(48 * g + 16 * j), o) };
+            }
+        }
+        groups * 16
+    }
+
+    /// Copies `src` into `dst` with non-temporal stores for the 16-byte aligned middle:
+    /// outputs written once and read much later should not evict the basis panel.
+    pub(super) fn stream_copy(dst: &mut [f32], src: &[f32]) {
+        let n = dst.len().min(src.len());
+        let head = dst.as_ptr().align_offset(16).min(n);
+        let body = head + (n - head) / 4 * 4;
+        dst[..head].copy_from_slice(&src[..head]);
+        for i in (head..body).step_by(4) {
+            // SAFETY: i + 4 <= body <= n, both slices hold n floats, and `dst + i` is
+            // 16-byte aligned (i - head is a multiple of 4 floats). SSE is baseline x86-64.
+            unsafe { _mm_stream_ps(dst.as_mut_ptr().add(i), _mm_loadu_ps(src.as_ptr().add(i))) };
+        }
+        dst[body..n].copy_from_slice(&src[body..n]);
+    }
+
+    /// Orders this thread's non-temporal stores before whatever it does next (rayon's
+    /// join then publishes them).
+    pub(super) fn store_fence() {
+        // SAFETY: SSE is baseline on x86-64; the fence has no memory-safety preconditions.
+        unsafe { _mm_sfence() };
+    }
+}
+
+/// Converts a half-float panel to f32 (exactly: every half is an f32), with the widest
+/// conversion the kernel's CPU level has.
+fn widen(kernel: Kernel, src: &[f16], dst: &mut [Row]) {
+    let dst = dst.as_flattened_mut();
+    match kernel {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: `composite_with` only runs kernels whose `supported()` is true.
+        Kernel::Avx512 => unsafe { x86::widen_avx512(src, dst) },
+        _ => src.convert_to_f32_slice(dst),
+    }
+}
+
 /// Renders every look of `weights` into its output (interleaved RGB, `pixels * 3` long),
 /// converting each linear value with `encode` (sRGB bytes for thumbnails, clamped floats
 /// for the gallery's proxy).
@@ -40,49 +352,172 @@ pub fn composite<O: Send>(
     outputs: &mut [Vec<O>],
     encode: impl Fn(f32) -> O + Sync,
 ) {
-    let pixels = basis.pixels();
-    let lights = basis.lights;
-    let ntiles = pixels.div_ceil(TILE);
-    let mut tiles: Vec<Vec<&mut [O]>> = (0..ntiles).map(|_| Vec::new()).collect();
-    for out in outputs.iter_mut() {
-        debug_assert_eq!(out.len(), pixels * 3);
-        for (t, chunk) in out.chunks_mut(TILE * 3).enumerate() {
-            tiles[t].push(chunk);
+    composite_with(Kernel::detect(), basis, weights, outputs, |rgb, out| {
+        for (i, px) in out.chunks_exact_mut(3).enumerate() {
+            px[0] = encode(rgb[0][i]);
+            px[1] = encode(rgb[1][i]);
+            px[2] = encode(rgb[2][i]);
+        }
+    });
+}
+
+/// Renders linear RGB clamped to 0..1 (interleaved), with the clamp fused into the store
+/// and non-temporal stores where the CPU has them: the fastest way to get floats out.
+pub fn composite_clamped(
+    kernel: Kernel,
+    basis: &BasisImages,
+    weights: &[Vec<[f32; 3]>],
+    outputs: &mut [Vec<f32>],
+) {
+    composite_with(kernel, basis, weights, outputs, |rgb, out| {
+        let mut buf = [0.0f32; STRIP * 3];
+        let n = out.len() / 3;
+        let mut done = 0;
+        #[cfg(target_arch = "x86_64")]
+        if kernel == Kernel::Avx512 {
+            // SAFETY: composite_with asserted that this kernel's features are present.
+            done = unsafe { x86::interleave_clamped_avx512(rgb, &mut buf[..n * 3]) };
+        }
+        for (i, px) in buf[..n * 3].chunks_exact_mut(3).enumerate().skip(done) {
+            px[0] = rgb[0][i].clamp(0.0, 1.0);
+            px[1] = rgb[1][i].clamp(0.0, 1.0);
+            px[2] = rgb[2][i].clamp(0.0, 1.0);
+        }
+        #[cfg(target_arch = "x86_64")]
+        x86::stream_copy(out, &buf);
+        #[cfg(not(target_arch = "x86_64"))]
+        out.copy_from_slice(&buf[..out.len()]);
+    });
+}
+
+/// The batched compositor with an explicit kernel: renders every look of `weights`, and
+/// hands each candidate's strip (`[R, G, B]` planes, one value per pixel) to `emit`
+/// together with the strip's part of that candidate's output (`3 * pixels` long).
+///
+/// Panics if `kernel` is not [`Kernel::supported`] or an output is not `pixels * 3` long.
+pub fn composite_with<O: Send>(
+    kernel: Kernel,
+    basis: &BasisImages,
+    weights: &[Vec<[f32; 3]>],
+    outputs: &mut [Vec<O>],
+    emit: impl Fn([&[f32]; 3], &mut [O]) + Sync,
+) {
+    assert!(kernel.supported(), "{kernel:?} does not run on this CPU");
+    let (pixels, lights) = (basis.pixels(), basis.lights);
+    assert!(outputs.iter().all(|o| o.len() == pixels * 3));
+    assert!(weights.iter().all(|w| w.len() >= lights));
+    let cands = weights.len().min(outputs.len());
+    if cands == 0 || pixels == 0 {
+        return;
+    }
+    // Weights per channel and block of MR candidates, `[light][candidate]` (missing
+    // candidates weigh 0), and per block the lights that contribute at all.
+    let blocks = cands.div_ceil(MR);
+    let packed: Vec<Vec<[f32; MR]>> = (0..3 * blocks)
+        .map(|i| {
+            let (ch, blk) = (i / blocks, i % blocks);
+            (0..lights)
+                .map(|l| {
+                    std::array::from_fn(|r| weights.get(blk * MR + r).map_or(0.0, |w| w[l][ch]))
+                })
+                .collect()
+        })
+        .collect();
+    let active: Vec<Vec<u32>> = packed
+        .iter()
+        .map(|w| {
+            (0..lights as u32)
+                .filter(|&l| w[l as usize] != [0.0; MR])
+                .collect()
+        })
+        .collect();
+
+    let strips = pixels.div_ceil(STRIP);
+    let threads = rayon::current_num_threads().max(1);
+    let task_strips = (strips / (8 * threads)).clamp(1, TASK_STRIPS);
+    let task_px = task_strips * STRIP;
+    let mut tasks: Vec<Vec<&mut [O]>> = (0..pixels.div_ceil(task_px))
+        .map(|_| Vec::with_capacity(cands))
+        .collect();
+    for out in outputs.iter_mut().take(cands) {
+        for (t, chunk) in out.chunks_mut(task_px * 3).enumerate() {
+            tasks[t].push(chunk);
         }
     }
-    tiles.into_par_iter().enumerate().for_each(|(t, outs)| {
-        let start = t * TILE;
-        let len = (pixels - start).min(TILE);
-        let mut acc = [[0.0f32; TILE]; 3];
-        for (w, out) in weights.iter().zip(outs) {
-            for (ch, acc) in acc.iter_mut().enumerate() {
-                let acc = &mut acc[..len];
-                acc.fill(0.0);
-                for (l, wl) in w.iter().enumerate().take(lights) {
-                    let k = wl[ch];
-                    if k == 0.0 {
-                        continue;
+    tasks.into_par_iter().enumerate().for_each(|(t, mut outs)| {
+        PANEL.with_borrow_mut(|panel| {
+            panel.resize(3 * lights, [0.0; STRIP]);
+            let acc = &mut [[[0.0f32; STRIP]; MR]; 3];
+            for s in 0..task_strips {
+                let start = t * task_px + s * STRIP;
+                if start >= pixels {
+                    break;
+                }
+                let len = (pixels - start).min(STRIP);
+                let strip = start / STRIP;
+                let rows: &[Row] = match basis.panel(strip) {
+                    Panel::Single(p) => p.as_chunks().0,
+                    Panel::Half(p) => {
+                        widen(kernel, p, panel);
+                        panel
                     }
-                    let b = &basis.plane(ch, l)[start..start + len];
-                    for (a, &v) in acc.iter_mut().zip(b) {
-                        *a += k * v;
+                };
+                // The next strip's panel, shared out over this strip's kernel calls.
+                let next = match (strip + 1 < basis.strips()).then(|| basis.panel(strip + 1)) {
+                    Some(Panel::Single(p)) => (p.as_ptr().cast::<u8>(), size_of_val(p)),
+                    Some(Panel::Half(p)) => (p.as_ptr().cast::<u8>(), size_of_val(p)),
+                    None => (std::ptr::null(), 0),
+                };
+                let per_call = next.1.div_ceil(64).div_ceil(3 * blocks);
+                let local = s * STRIP * 3..(s * STRIP + len) * 3;
+                for blk in 0..blocks {
+                    for (ch, acc) in acc.iter_mut().enumerate() {
+                        let i = ch * blocks + blk;
+                        let call = blk * 3 + ch;
+                        let ahead = Ahead {
+                            start: next.0.wrapping_add(call * per_call * 64),
+                            lines: per_call
+                                .min(next.1.div_ceil(64).saturating_sub(call * per_call)),
+                        };
+                        let b = &rows[ch * lights..(ch + 1) * lights];
+                        kernel.block(&packed[i], b, &active[i], acc, ahead);
+                    }
+                    for r in 0..MR.min(cands - blk * MR) {
+                        let rgb = [&acc[0][r][..len], &acc[1][r][..len], &acc[2][r][..len]];
+                        emit(rgb, &mut outs[blk * MR + r][local.clone()]);
                     }
                 }
             }
-            for (i, px) in out.chunks_exact_mut(3).enumerate() {
-                px[0] = encode(acc[0][i]);
-                px[1] = encode(acc[1][i]);
-                px[2] = encode(acc[2][i]);
-            }
-        }
+        });
+        #[cfg(target_arch = "x86_64")]
+        x86::store_fence();
+        // A task is at most a millisecond or so: offering the CPU between tasks lets a
+        // thread that just woke (the DMX clock) run now rather than when the scheduler's
+        // slice ends, which measurably cuts late frames during generates (~1 us per task).
+        std::thread::yield_now();
     });
+}
+
+thread_local! {
+    /// Each thread's half-to-single conversion buffer for one strip's panel, kept between
+    /// renders (a few hundred KB; allocating and zeroing it per task showed in profiles).
+    static PANEL: std::cell::RefCell<Vec<Row>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
+/// `n` zeroed output buffers of `len`, zeroed on all threads (the allocator usually hands
+/// back recycled memory, so zeroing is a real memset that showed up in profiles).
+pub fn zeroed_outputs<O: Default + Clone + Send>(n: usize, len: usize) -> Vec<Vec<O>> {
+    (0..n)
+        .into_par_iter()
+        .map(|_| vec![O::default(); len])
+        .collect()
 }
 
 /// Renders looks to 8-bit sRGB images.
 pub fn render_srgb8(basis: &BasisImages, looks: &[&Look], gain: f32) -> Vec<image::RgbImage> {
     let w = weights(looks, gain);
-    let mut outs: Vec<Vec<u8>> = looks.iter().map(|_| vec![0; basis.pixels() * 3]).collect();
-    composite(basis, &w, &mut outs, encode_srgb8);
+    let mut outs = zeroed_outputs(looks.len(), basis.pixels() * 3);
+    composite_with(Kernel::detect(), basis, &w, &mut outs, encode_srgb8_planar);
     outs.into_iter()
         .map(|buf| {
             image::RgbImage::from_raw(basis.width as u32, basis.height as u32, buf)
@@ -104,4 +539,92 @@ pub fn render_reference(basis: &BasisImages, look: &Look, gain: f32) -> Vec<f32>
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::basis::Precision;
+    use crate::look::Level;
+
+    /// 7 lights over a 37x11 image (pixels not a multiple of the strip), HDR values up to 4.
+    fn planes() -> (usize, usize, usize, Vec<f32>) {
+        let (w, h, lights) = (37, 11, 7);
+        let planes = (0..3 * lights * w * h)
+            .map(|i| ((i * 7919) % 1000) as f32 / 250.0)
+            .collect();
+        (w, h, lights, planes)
+    }
+
+    /// 9 looks (not a multiple of the register block); light 2 off in all but the last.
+    fn looks(lights: usize) -> Vec<Look> {
+        (0..9)
+            .map(|k| Look {
+                levels: (0..lights)
+                    .map(|l| Level {
+                        intensity: if l == 2 && k < 8 {
+                            0.0
+                        } else {
+                            ((k * 31 + l * 17) % 100) as f32 / 100.0
+                        },
+                        color: [0.9, ((k + l) % 5) as f32 / 5.0, 0.4],
+                    })
+                    .collect(),
+            })
+            .collect()
+    }
+
+    fn check(kernel: Kernel, precision: Precision) {
+        let (w, h, lights, planes) = planes();
+        let basis = BasisImages::from_planes(w, h, lights, &planes, precision);
+        let looks = looks(lights);
+        let refs: Vec<&Look> = looks.iter().collect();
+        let wts = weights(&refs, 0.7);
+        let mut raw: Vec<Vec<f32>> = looks.iter().map(|_| vec![0.0; w * h * 3]).collect();
+        composite_with(kernel, &basis, &wts, &mut raw, |rgb, out| {
+            for (i, px) in out.chunks_exact_mut(3).enumerate() {
+                px.copy_from_slice(&[rgb[0][i], rgb[1][i], rgb[2][i]]);
+            }
+        });
+        let mut clamped: Vec<Vec<f32>> = looks.iter().map(|_| vec![0.0; w * h * 3]).collect();
+        composite_clamped(kernel, &basis, &wts, &mut clamped);
+        for (k, look) in looks.iter().enumerate() {
+            let want = render_reference(&basis, look, 0.7);
+            for (i, &v) in want.iter().enumerate() {
+                assert!(
+                    (raw[k][i] - v).abs() <= 1e-4 * v.max(1.0),
+                    "{kernel:?} {precision:?} look {k} sample {i}: {} vs {v}",
+                    raw[k][i]
+                );
+                assert!((clamped[k][i] - v.clamp(0.0, 1.0)).abs() <= 1e-4);
+            }
+        }
+    }
+
+    #[test]
+    fn every_kernel_matches_the_scalar_reference() {
+        for kernel in Kernel::ALL {
+            if !kernel.supported() {
+                eprintln!("note: {kernel:?} does not run on this CPU; its test is skipped");
+                continue;
+            }
+            check(kernel, Precision::Single);
+            check(kernel, Precision::Half);
+        }
+    }
+
+    #[test]
+    fn half_storage_stays_within_half_float_precision_of_single() {
+        let (w, h, lights, planes) = planes();
+        let single = BasisImages::from_planes(w, h, lights, &planes, Precision::Single);
+        let half = BasisImages::from_planes(w, h, lights, &planes, Precision::Half);
+        assert_eq!(half.bytes() * 2, single.bytes());
+        for look in looks(lights) {
+            let a = render_reference(&single, &look, 1.0);
+            let b = render_reference(&half, &look, 1.0);
+            for (a, b) in a.iter().zip(&b) {
+                assert!((a - b).abs() <= 1e-3 * a.max(1.0), "{a} vs {b}");
+            }
+        }
+    }
 }

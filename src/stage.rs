@@ -3,7 +3,7 @@
 
 use std::path::Path;
 
-use crate::basis::{self, BasisImages};
+use crate::basis::{self, BasisImages, Precision};
 use crate::gallery::{Generation, PROXY_WIDTH};
 use crate::look::Look;
 use crate::objective::Objective;
@@ -41,7 +41,17 @@ impl Stage {
 
     /// Loads the basis images of an already validated scene.
     pub fn from_scene(scene: Scene, thumb_width: usize) -> Result<Stage, SceneError> {
-        let mut sizes = basis::load(&scene, &[WORKING_WIDTH, PROXY_WIDTH, thumb_width])?;
+        // Targeting measures the working size exactly and the small proxy is used in place;
+        // thumbnails, most of the bytes, are stored as half floats (half the memory and
+        // memory traffic, invisible in 8-bit output).
+        let mut sizes = basis::load(
+            &scene,
+            &[
+                (WORKING_WIDTH, Precision::Single),
+                (PROXY_WIDTH, Precision::Single),
+                (thumb_width, Precision::Half),
+            ],
+        )?;
         let thumbs = sizes.pop().expect("three sizes asked");
         let proxy = sizes.pop().expect("three sizes asked");
         let working = sizes.pop().expect("three sizes asked");
@@ -71,7 +81,8 @@ impl Stage {
         }
     }
 
-    /// Samples and clusters candidates for the objectives from `base`.
+    /// Samples and clusters candidates for the objectives from `base`, and renders the
+    /// representatives' thumbnails (what a user sees first).
     pub fn generate(&self, request: &GenerateRequest, rng: &mut impl rand::Rng) -> Generation {
         let targets: Vec<Target> = request.objectives.iter().map(|o| self.target(o)).collect();
         let plan = Plan::new(
@@ -81,7 +92,7 @@ impl Stage {
             request.base,
             request.spread,
         );
-        crate::gallery::generate(
+        let mut generation = crate::gallery::generate(
             &plan,
             request.base,
             &self.proxy,
@@ -89,7 +100,14 @@ impl Stage {
             request.count,
             request.clusters,
             rng,
-        )
+        );
+        let reps: Vec<&Look> = generation
+            .entries
+            .iter()
+            .map(|e| &generation.candidates[e[0]])
+            .collect();
+        generation.thumbnails = self.thumbnails(&reps);
+        generation
     }
 
     /// Thumbnails of looks, in order.

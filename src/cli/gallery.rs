@@ -137,14 +137,8 @@ pub fn run(args: Args, matches: &ArgMatches) -> anyhow::Result<()> {
         },
         &mut rng,
     );
-    let reps: Vec<&crate::look::Look> = generation
-        .entries
-        .iter()
-        .map(|e| &generation.candidates[e[0]])
-        .collect();
-    let thumbs = stage.thumbnails(&reps);
     let ms = started.elapsed().as_secs_f64() * 1000.0;
-    contact_sheet(&thumbs)
+    contact_sheet(&generation.thumbnails)
         .save_with_format(&args.out, image::ImageFormat::Png)
         .with_context(|| format!("{}: cannot write the contact sheet", args.out.display()))?;
     if let Some(json) = &args.json {

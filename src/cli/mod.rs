@@ -1,5 +1,6 @@
 //! The command line (cli.md): argument parsing and one module per subcommand.
 
+mod bench;
 mod check;
 mod gallery;
 mod render;
@@ -40,6 +41,8 @@ enum Command {
     Send(send::Args),
     /// Writes the TouchOSC layout for the booth tablet (regenerate it when addresses change).
     Touchosc(touchosc::Args),
+    /// Measures the FLOP bound and the performance targets on this machine.
+    Bench(bench::Args),
 }
 
 /// Runs the command line; returns the process exit code. User mistakes print one line on
@@ -73,6 +76,7 @@ pub fn main() -> std::process::ExitCode {
             .map_err(anyhow::Error::from),
         Command::Send(args) => send::run(args),
         Command::Touchosc(args) => touchosc::run(args),
+        Command::Bench(args) => bench::run(args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

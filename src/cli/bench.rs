@@ -1,0 +1,481 @@
+//! `visobjd bench`: measures this machine's FLOP bound and, in the same run, every row of
+//! the performance targets (issue 5), so ratios are comparable even on a busy machine.
+
+use std::net::UdpSocket;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use rand::{RngExt, SeedableRng};
+
+use crate::look::{Level, Look};
+use crate::objective::{Aspects, Objective, Region, analyze, decode_reference};
+use crate::output::{Output, OutputConfig, SacnDest};
+use crate::render::{Kernel, composite_clamped, weights};
+use crate::sampler::{Constraints, Spread};
+use crate::stage::{GenerateRequest, Stage, THUMB_WIDTH};
+
+/// Arguments of `bench`.
+#[derive(clap::Args)]
+pub struct Args {
+    /// Fewer repetitions (about 4x faster, noisier).
+    #[arg(long)]
+    quick: bool,
+    /// The 44-light scene folder.
+    #[arg(long, default_value = "scenes/demo")]
+    scene: PathBuf,
+}
+
+type Rng = rand::rngs::Xoshiro256PlusPlus;
+
+/// Lights, size and universes of the synthetic large scene.
+const BIG: (usize, usize, usize, u16) = (267, 640, 360, 16);
+
+/// Runs `bench`.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let reps = if args.quick { 3 } else { 10 };
+    let kernel = Kernel::detect();
+    println!(
+        "visobjd bench: {} threads, kernel {kernel:?}, {}",
+        rayon::current_num_threads(),
+        cpu_model()
+    );
+    let bound = flop_bound(kernel);
+    println!(
+        "FLOP bound (FMA loop, all threads): {:.1} GFLOP/s\n",
+        bound / 1e9
+    );
+
+    // The large scene first, so its load and resident memory are not mixed with the demo's.
+    let dir = std::env::temp_dir().join(format!("visobjd-bench-{}", std::process::id()));
+    let written = write_big_scene(&dir)?;
+    let rss_before = rss_bytes();
+    let started = Instant::now();
+    let big = Stage::load(&dir, THUMB_WIDTH).context("loading the synthetic scene")?;
+    let load_s = started.elapsed().as_secs_f64();
+    let rss = rss_bytes();
+    let kept = big.proxy.bytes() + big.thumbs.bytes();
+    let demo = Stage::load(&args.scene, THUMB_WIDTH)
+        .with_context(|| format!("{}: cannot load", args.scene.display()))?;
+    let objective = objective(&args.scene)?;
+
+    let mut rows = Vec::new();
+    for (name, stage) in [("44", &demo), ("267", &big)] {
+        // Every kernel this CPU runs, the dispatched one last (it is the row with a target).
+        let others = Kernel::ALL
+            .into_iter()
+            .filter(|k| k.supported() && *k != kernel);
+        for k in others.filter(|_| !args.quick).chain([kernel]) {
+            // The machine is shared: measure the bound next to each row, so that both
+            // see the same competition for the cores.
+            let bound = flop_bound(kernel).max(bound);
+            let flops = compositor(stage, k, reps);
+            rows.push(Row {
+                name: format!(
+                    "compositor [{k:?}], {name} lights, {}x{}, 100 candidates",
+                    stage.thumbs.width, stage.thumbs.height
+                ),
+                value: flops / 1e9,
+                unit: "GFLOP/s",
+                ratio: flops / bound,
+                target: (k == kernel).then_some(0.6),
+                more: true,
+            });
+        }
+    }
+    for (name, stage, target) in [("44", &demo, 15.0), ("267", &big, 40.0)] {
+        let (ms, cpu_ms) = generate_ms(stage, &objective, reps * 2);
+        rows.push(Row::at_most(
+            format!("/vo/generate 100 -> 12 + thumbs, {name} lights ({cpu_ms:.0} ms CPU)"),
+            ms,
+            "ms",
+            target,
+        ));
+    }
+    rows.push(Row::at_most(
+        format!("scene load, {} lights at {}x{}", BIG.0, BIG.1, BIG.2),
+        load_s,
+        "s",
+        3.0,
+    ));
+    rows.push(Row::at_most(
+        format!(
+            "resident memory, {} MB of basis kept (was {} MB before load)",
+            kept >> 20,
+            rss_before >> 20
+        ),
+        (rss >> 20) as f64,
+        "MB",
+        (1.2 * kept as f64 / (1 << 20) as f64) + 60.0,
+    ));
+    let (p99, period) = dmx_p99(&big, &dir, &objective, if args.quick { 2.0 } else { 4.0 })?;
+    rows.push(Row::at_most(
+        format!(
+            "DMX p99 frame interval, {} universes, period {period:.2} ms",
+            BIG.3
+        ),
+        p99,
+        "ms",
+        period + 2.0,
+    ));
+    drop(big);
+    let _ = std::fs::remove_dir_all(&dir);
+
+    println!(
+        "{:<64} {:>16} {:>6} {:>7}",
+        "measure", "value", "ratio", "target"
+    );
+    for r in &rows {
+        let verdict = match r.target {
+            Some(t) if (r.ratio >= t) == r.more => "ok",
+            Some(_) => "MISSED",
+            None => "",
+        };
+        let target = r.target.map_or(String::new(), |t| {
+            format!("{}{t:.2}", if r.more { ">=" } else { "<=" })
+        });
+        println!(
+            "{:<64} {:>16} {:>6.2} {target:>7} {verdict}",
+            r.name,
+            format!("{:.2} {}", r.value, r.unit),
+            r.ratio,
+        );
+    }
+    println!(
+        "(ratio: compositor rows to the FLOP bound measured just before them (the higher of \
+         that and the first), the others to their limit)"
+    );
+    println!("\n(the synthetic scene: {written} EXR files, {load_s:.2} s to load)");
+    Ok(())
+}
+
+/// One line of the report.
+struct Row {
+    name: String,
+    value: f64,
+    unit: &'static str,
+    /// Value over its bound (compositor) or limit (the rest).
+    ratio: f64,
+    /// Required ratio, if the row has a target.
+    target: Option<f64>,
+    /// Whether the ratio must be at least (else at most) the target.
+    more: bool,
+}
+
+impl Row {
+    /// A row that must stay at or under `limit`.
+    fn at_most(name: String, value: f64, unit: &'static str, limit: f64) -> Row {
+        Row {
+            name,
+            value,
+            unit,
+            ratio: value / limit,
+            target: Some(1.0),
+            more: false,
+        }
+    }
+}
+
+fn cpu_model() -> String {
+    std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("model name"))
+                .and_then(|l| l.split(':').nth(1))
+                .map(|m| m.trim().to_string())
+        })
+        .unwrap_or_else(|| "unknown CPU".into())
+}
+
+/// Resident set size from /proc/self/status (0 where there is none).
+fn rss_bytes() -> usize {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("VmRSS:"))
+                .and_then(|l| l.split_whitespace().nth(1))
+                .and_then(|kb| kb.parse::<usize>().ok())
+        })
+        .map_or(0, |kb| kb * 1024)
+}
+
+/// Best of three: floating-point operations per second of independent FMA chains on every
+/// rayon thread at the kernel's vector width.
+fn flop_bound(kernel: Kernel) -> f64 {
+    const ITERS: u64 = 20_000_000;
+    (0..3)
+        .map(|_| {
+            let started = Instant::now();
+            let flops: u64 = rayon::broadcast(|_| fma_loop(kernel, ITERS)).iter().sum();
+            flops as f64 / started.elapsed().as_secs_f64()
+        })
+        .fold(0.0, f64::max)
+}
+
+/// Runs `iters` rounds of 12 independent FMA chains; returns the flops done.
+fn fma_loop(kernel: Kernel, iters: u64) -> u64 {
+    match kernel {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: `kernel` came from `Kernel::detect`, so its features are present.
+        Kernel::Avx512 | Kernel::Avx2 => unsafe { peak::fma_loop(kernel == Kernel::Avx512, iters) },
+        _ => {
+            let mut acc = [1.0f32; 48];
+            for _ in 0..iters / 4 {
+                for a in &mut acc {
+                    *a = *a * 0.999_999 + 1e-7;
+                }
+            }
+            std::hint::black_box(acc);
+            iters / 4 * 48 * 2
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+mod peak {
+    use std::arch::x86_64::*;
+
+    /// 12 chains are more than latency x throughput of any current FMA unit.
+    const CHAINS: usize = 12;
+
+    /// # Safety
+    /// The CPU must have AVX-512F when `wide`, else AVX2 and FMA.
+    pub(super) unsafe fn fma_loop(wide: bool, iters: u64) -> u64 {
+        if wide {
+            // SAFETY: the caller checked AVX-512F.
+            unsafe { avx512(iters) }
+        } else {
+            // SAFETY: the caller checked AVX2 and FMA.
+            unsafe { avx2(iters) }
+        }
+    }
+
+    #[target_feature(enable = "avx512f")]
+    fn avx512(iters: u64) -> u64 {
+        let (m, a) = (_mm512_set1_ps(0.999_999), _mm512_set1_ps(1e-7));
+        let mut c = [_mm512_set1_ps(1.0); CHAINS];
+        for _ in 0..iters {
+            for c in &mut c {
+                *c = _mm512_fmadd_ps(*c, m, a);
+            }
+        }
+        std::hint::black_box(c);
+        iters * (CHAINS * 16 * 2) as u64
+    }
+
+    #[target_feature(enable = "avx2,fma")]
+    fn avx2(iters: u64) -> u64 {
+        let (m, a) = (_mm256_set1_ps(0.999_999), _mm256_set1_ps(1e-7));
+        let mut c = [_mm256_set1_ps(1.0); CHAINS];
+        for _ in 0..iters {
+            for c in &mut c {
+                *c = _mm256_fmadd_ps(*c, m, a);
+            }
+        }
+        std::hint::black_box(c);
+        iters * (CHAINS * 8 * 2) as u64
+    }
+}
+
+/// Median FLOP rate of 100 random candidates rendered to clamped linear RGB.
+fn compositor(stage: &Stage, kernel: Kernel, reps: usize) -> f64 {
+    let basis = &stage.thumbs;
+    let mut rng = Rng::seed_from_u64(7);
+    let looks: Vec<Look> = (0..100)
+        .map(|_| Look {
+            levels: (0..basis.lights)
+                .map(|_| Level {
+                    intensity: rng.random(),
+                    color: [rng.random(), rng.random(), rng.random()],
+                })
+                .collect(),
+        })
+        .collect();
+    let refs: Vec<&Look> = looks.iter().collect();
+    let w = weights(&refs, stage.gain);
+    let mut outs: Vec<Vec<f32>> = looks
+        .iter()
+        .map(|_| vec![0.0; basis.pixels() * 3])
+        .collect();
+    composite_clamped(kernel, basis, &w, &mut outs); // warm-up: page faults, panels
+    let flops = 2.0 * 3.0 * (basis.lights * basis.pixels() * looks.len()) as f64;
+    let mut times: Vec<f64> = (0..reps)
+        .map(|_| {
+            let started = Instant::now();
+            composite_clamped(kernel, basis, &w, &mut outs);
+            started.elapsed().as_secs_f64()
+        })
+        .collect();
+    flops / median(&mut times)
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// An objective from the first reference image of the demo scene.
+fn objective(scene: &Path) -> anyhow::Result<Objective> {
+    let mut refs: Vec<PathBuf> = std::fs::read_dir(scene.join("refs"))
+        .with_context(|| format!("{}: no refs folder", scene.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|e| e == "png"))
+        .collect();
+    refs.sort();
+    let path = refs.first().context("no reference PNG in the demo scene")?;
+    let img = decode_reference(path).map_err(anyhow::Error::msg)?;
+    Ok(Objective {
+        image: path.display().to_string(),
+        aspects: Aspects::Both,
+        region: Region::FULL,
+        analysis: analyze(&img, Region::FULL, 5),
+    })
+}
+
+/// One generate as the daemon runs it: 100 candidates into 12 entries, thumbnails included.
+fn generate_once(stage: &Stage, objective: &Objective, seed: u64) -> f64 {
+    let base = Look::off(stage.scene.lights.len());
+    let started = Instant::now();
+    let g = stage.generate(
+        &GenerateRequest {
+            objectives: std::slice::from_ref(objective),
+            constraints: &Constraints::none(&stage.rig),
+            base: &base,
+            spread: Spread::default(),
+            count: 100,
+            clusters: 12,
+        },
+        &mut Rng::seed_from_u64(seed),
+    );
+    std::hint::black_box(&g);
+    started.elapsed().as_secs_f64() * 1000.0
+}
+
+/// Median wall time of `runs` generates, and the mean CPU time (all threads) they used: on
+/// a shared machine the second says how much of the first was waiting for a core.
+fn generate_ms(stage: &Stage, objective: &Objective, runs: usize) -> (f64, f64) {
+    generate_once(stage, objective, 999); // warm-up
+    let cpu = cpu_ms();
+    let mut ms: Vec<f64> = (1..=runs as u64)
+        .map(|seed| generate_once(stage, objective, seed))
+        .collect();
+    let cpu = (cpu_ms() - cpu) / runs as f64;
+    (median(&mut ms), cpu)
+}
+
+/// CPU time of this process so far (user + system, all threads), from /proc/self/stat.
+fn cpu_ms() -> f64 {
+    let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
+    // Fields after the parenthesised command name; utime and stime are the 12th and 13th,
+    // in clock ticks (100 per second on Linux).
+    let fields: Vec<f64> = stat
+        .rsplit(')')
+        .next()
+        .unwrap_or("")
+        .split_whitespace()
+        .skip(11)
+        .take(2)
+        .filter_map(|f| f.parse().ok())
+        .collect();
+    fields.iter().sum::<f64>() * 10.0
+}
+
+/// Writes the synthetic scene: smooth coloured spots over a dim wash, one per light,
+/// spread over `BIG.3` universes. Returns the number of basis images.
+fn write_big_scene(dir: &Path) -> anyhow::Result<usize> {
+    use rayon::prelude::*;
+    let (lights, w, h, universes) = BIG;
+    std::fs::create_dir_all(dir.join("basis"))?;
+    let per_universe = lights.div_ceil(universes as usize);
+    let mut toml = String::from("name = \"bench, synthetic\"\n");
+    for i in 0..lights {
+        toml += &format!(
+            "[[light]]\nchannel = {}\nbasis = \"basis/{:03}.exr\"\nprofile = \"irgb\"\n\
+             universe = {}\naddress = {}\n",
+            i + 1,
+            i + 1,
+            i / per_universe + 1,
+            (i % per_universe) * 4 + 1
+        );
+    }
+    std::fs::write(dir.join("scene.toml"), toml)?;
+    (0..lights).into_par_iter().try_for_each(|i| {
+        let mut rng = Rng::seed_from_u64(i as u64);
+        let (cx, cy) = (
+            rng.random::<f32>() * w as f32,
+            rng.random::<f32>() * h as f32,
+        );
+        let radius = (0.05 + 0.2 * rng.random::<f32>()) * w as f32;
+        let tint: [f32; 3] = std::array::from_fn(|_| 0.3 + 0.7 * rng.random::<f32>());
+        let path = dir.join(format!("basis/{:03}.exr", i + 1));
+        exr::prelude::write_rgb_file(&path, w, h, |x, y| {
+            let d2 = ((x as f32 - cx).powi(2) + (y as f32 - cy).powi(2)) / (radius * radius);
+            let v = 0.01 + 0.5 * (-d2).exp();
+            (v * tint[0], v * tint[1], v * tint[2])
+        })
+        .with_context(|| format!("{}: cannot write", path.display()))
+    })?;
+    Ok(lights)
+}
+
+/// Runs back-to-back generates for `seconds` while an `Output` sends the scene's universes
+/// by sACN to a local socket; returns the p99 interval between one universe's packets and
+/// the period, in ms.
+fn dmx_p99(
+    stage: &Stage,
+    dir: &Path,
+    objective: &Objective,
+    seconds: f64,
+) -> anyhow::Result<(f64, f64)> {
+    let receiver = UdpSocket::bind("127.0.0.1:0")?;
+    receiver.set_read_timeout(Some(Duration::from_millis(100)))?;
+    let config = OutputConfig {
+        sacn: vec![SacnDest {
+            port: receiver.local_addr()?.port(),
+            ..SacnDest::default()
+        }],
+        ..OutputConfig::default()
+    };
+    let period = 1000.0 / f64::from(config.rate_hz);
+    let patch = crate::dmx::patch::Patch::new(&stage.scene);
+    let output = Output::start(&config, patch, dir, Look::off(stage.scene.lights.len()))?;
+    let stop = std::sync::atomic::AtomicBool::new(false);
+    let arrivals = std::thread::scope(|s| {
+        let listener = s.spawn(|| {
+            let mut buf = [0u8; 1024];
+            let mut arrivals = Vec::new();
+            while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+                if let Ok(n) = receiver.recv(&mut buf)
+                    // E1.31 data packets carry the universe at bytes 113..115.
+                    && n > 115
+                    && u16::from_be_bytes([buf[113], buf[114]]) == 1
+                {
+                    arrivals.push(Instant::now());
+                }
+            }
+            arrivals
+        });
+        let started = Instant::now();
+        let mut seed = 1;
+        while started.elapsed().as_secs_f64() < seconds {
+            generate_once(stage, objective, seed);
+            seed += 1;
+        }
+        stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        listener.join().expect("listener thread")
+    });
+    output.shutdown();
+    let mut gaps: Vec<f64> = arrivals
+        .windows(2)
+        .map(|w| (w[1] - w[0]).as_secs_f64() * 1000.0)
+        .collect();
+    anyhow::ensure!(
+        gaps.len() > 10,
+        "only {} sACN packets arrived",
+        arrivals.len()
+    );
+    gaps.sort_by(f64::total_cmp);
+    Ok((gaps[(gaps.len() * 99) / 100], period))
+}
