@@ -17,6 +17,7 @@ use std::time::{Duration, Instant};
 use rosc::{OscMessage, OscPacket, OscType};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::{TcpListener, TcpStream, UdpSocket};
+use tokio::runtime::Handle;
 use tokio::sync::{Notify, mpsc};
 use tokio::task::{JoinHandle, JoinSet};
 use tracing::{debug, error, info, trace, warn};
@@ -549,26 +550,31 @@ async fn serve_sender(from: SocketAddr, backlogs: Backlogs, sender: Sender, shar
                 }
             }
         };
-        let (handler_shared, handler_peer) = (shared.clone(), peer.clone());
-        let replies = tokio::task::spawn_blocking(move || {
-            batch
-                .iter()
-                .flat_map(|bytes| handler_shared.dispatch(bytes, &handler_peer))
-                .collect::<Vec<_>>()
-        })
-        .await
-        .unwrap_or_default();
-        for reply in replies {
-            let bytes = match encode_datagram(&reply) {
-                Ok(bytes) => bytes,
-                Err(e) => {
-                    debug!("OSC: reply to {} not sent: {e}", peer.reply_addr);
-                    continue;
+        // Each packet's replies go out before the next packet is handled, so they precede
+        // anything its handler answers later (Peer::reply from another thread).
+        let (handler_shared, handler_peer, runtime) =
+            (shared.clone(), peer.clone(), Handle::current());
+        let socket = sender.socket.clone();
+        let handled = tokio::task::spawn_blocking(move || {
+            for bytes in batch {
+                for reply in handler_shared.dispatch(&bytes, &handler_peer) {
+                    let bytes = match encode_datagram(&reply) {
+                        Ok(bytes) => bytes,
+                        Err(e) => {
+                            debug!("OSC: reply to {} not sent: {e}", handler_peer.reply_addr);
+                            continue;
+                        }
+                    };
+                    let sent = runtime.block_on(socket.send_to(&bytes, handler_peer.reply_addr));
+                    if let Err(e) = sent {
+                        debug!("OSC: reply to {} failed: {e}", handler_peer.reply_addr);
+                    }
                 }
-            };
-            if let Err(e) = sender.socket.send_to(&bytes, peer.reply_addr).await {
-                debug!("OSC: reply to {} failed: {e}", peer.reply_addr);
             }
+        })
+        .await;
+        if handled.is_err() {
+            error!("OSC: handling datagrams from {from} failed");
         }
     }
 }
