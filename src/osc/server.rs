@@ -8,7 +8,7 @@
 //! each connection) handled in order on a blocking thread of its own.
 
 use std::collections::{HashMap, VecDeque};
-use std::net::{IpAddr, SocketAddr};
+use std::net::SocketAddr;
 use std::panic::AssertUnwindSafe;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
@@ -348,17 +348,7 @@ struct Shared {
 impl Shared {
     /// The allow-list check, done before anything from the sender is decoded.
     fn permits(&self, from: SocketAddr) -> bool {
-        let ip = from.ip();
-        let ok = if self.allow.is_empty() {
-            match ip {
-                IpAddr::V4(v4) => v4.is_loopback(),
-                IpAddr::V6(v6) => v6
-                    .to_ipv4_mapped()
-                    .map_or(v6.is_loopback(), |v4| v4.is_loopback()),
-            }
-        } else {
-            self.allow.iter().any(|c| c.contains(ip))
-        };
+        let ok = crate::config::permits(&self.allow, from.ip());
         if !ok {
             self.refused.fetch_add(1, Ordering::Relaxed);
             if let Some(n) = throttled(&self.refused_log) {
