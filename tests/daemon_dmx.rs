@@ -10,12 +10,9 @@ use std::net::UdpSocket;
 use std::time::{Duration, Instant};
 
 use common::daemon::{
-    Daemon, Frame, Osc, PERIOD, PROTOS, Proto, STAGE, UNIVERSES, float, int, look_mismatch, num,
+    Daemon, Frame, GAP, Osc, PROTOS, Proto, STAGE, UNIVERSES, float, int, look_mismatch, num,
     same_look, string,
 };
-
-/// Continuity bound: two frame periods.
-const GAP: Duration = Duration::from_millis(2 * PERIOD.as_millis() as u64);
 
 #[test]
 fn pick_puts_exactly_the_candidate_on_the_wire() {

@@ -14,9 +14,8 @@ use std::collections::BTreeMap;
 use std::process::Command;
 use std::time::{Duration, Instant};
 
-use common::daemon::{Daemon, Osc, PATIENCE, PERIOD, PROTOS, UNIVERSES, int, num, string};
+use common::daemon::{Daemon, Osc, PROTOS, UNIVERSES, int, num, string};
 
-const GAP: Duration = Duration::from_millis(2 * PERIOD.as_millis() as u64);
 /// Look numbers the kill loop saves into.
 const LOOKS: u64 = 5;
 
@@ -171,22 +170,6 @@ fn kill_9_during_saves_200_times() {
     assert_eq!(r.kills, kills, "{r:?}");
 }
 
-/// Waits until every universe had a frame after `to`, then checks no gap over [`GAP`] in
-/// `from..to`.
-fn continuous(d: &Daemon, from: Instant, during: &str) {
-    let to = Instant::now();
-    let end = Instant::now() + PATIENCE;
-    while !PROTOS.iter().all(|&p| {
-        UNIVERSES
-            .iter()
-            .all(|&u| !d.wire.frames(p, u, to).is_empty())
-    }) {
-        assert!(Instant::now() < end, "no frames after {during}");
-        std::thread::sleep(Duration::from_millis(5));
-    }
-    d.wire.assert_continuous(from, to, GAP, during);
-}
-
 fn first_frames(d: &Daemon) -> Instant {
     for proto in PROTOS {
         for u in UNIVERSES {
@@ -223,7 +206,8 @@ fn an_unwritable_looks_file_refuses_the_save_and_the_show_goes_on() {
     d.ok("/vo/light/1/level", vec![int(60)], "/vo/light");
     d.ok("/vo/look/recall", vec![int(1)], "/vo/look/recalled");
     assert_eq!(d.looks(), [(1, "kept".to_string())]);
-    continuous(&d, from, "while the state folder could not be written");
+    d.wire
+        .assert_continuous_since(from, "while the state folder could not be written");
     // Repaired, saves work again.
     std::fs::remove_dir(state.join("looks.json")).expect("rmdir");
     d.ok("/vo/look/save", vec![int(2)], "/vo/look/saved");
@@ -272,7 +256,8 @@ fn a_full_disk_refuses_the_save_and_the_show_goes_on() {
     assert!(sentence.contains("No space left"), "{sentence}");
     d.ok("/vo/light/1/level", vec![int(60)], "/vo/light");
     assert_eq!(d.looks(), [(1, "before".to_string())]);
-    continuous(&d, from, "while the disk was full");
+    d.wire
+        .assert_continuous_since(from, "while the disk was full");
     // Space again: saves work, and the failed attempts left no temp files behind.
     std::fs::remove_file(&filler).expect("rm filler");
     d.ok("/vo/look/save", vec![int(2)], "/vo/look/saved");
@@ -296,5 +281,6 @@ fn basis_files_that_vanish_after_load_change_nothing() {
     let r = d.ok("/vo/pick", vec![int(1)], "/vo/picked");
     assert_eq!(num(&r.args[0]) as i32, 1, "{r:?}");
     d.ok("/vo/look/save", vec![int(3)], "/vo/look/saved");
-    continuous(&d, from, "after the basis files vanished");
+    d.wire
+        .assert_continuous_since(from, "after the basis files vanished");
 }

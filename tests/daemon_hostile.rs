@@ -10,13 +10,10 @@ mod common;
 use std::time::{Duration, Instant};
 
 use common::daemon::{
-    Daemon, Framing, Osc, PATIENCE, PERIOD, PROTOS, UNIVERSES, double, float, int, long, msg, num,
-    string, text,
+    Daemon, Framing, Osc, PATIENCE, PROTOS, UNIVERSES, double, float, int, long, msg, num, string,
+    text,
 };
 use rosc::{OscArray, OscBundle, OscPacket, OscTime, OscType};
-
-/// The contract's bound on a DMX gap (dmx.md): two frame periods.
-const GAP: Duration = Duration::from_millis(2 * PERIOD.as_millis() as u64);
 
 /// Starts a daemon and waits until every universe is on the wire; returns that moment.
 fn started(name: &str) -> (Daemon, Instant) {
@@ -34,18 +31,7 @@ fn still_running(d: &mut Daemon, from: Instant, during: &str) {
     assert!(d.alive(), "the daemon exited {during}\n{}", d.log());
     let r = d.ok("/vo/ping", vec![string("alive")], "/vo/pong");
     assert_eq!(r.args, [string("alive")]);
-    let to = Instant::now();
-    // The stretch up to `to` counts only once a later frame shows where it ends.
-    let end = Instant::now() + PATIENCE;
-    while !PROTOS.iter().all(|&p| {
-        UNIVERSES
-            .iter()
-            .all(|&u| !d.wire.frames(p, u, to).is_empty())
-    }) {
-        assert!(Instant::now() < end, "no frames after {during}");
-        std::thread::sleep(Duration::from_millis(5));
-    }
-    d.wire.assert_continuous(from, to, GAP, during);
+    d.wire.assert_continuous_since(from, during);
 }
 
 /// Sends raw bytes that must get exactly one `/vo/error` naming `addr` and change nothing.

@@ -14,9 +14,7 @@ use std::io::{ErrorKind, Read, Write};
 use std::net::{SocketAddr, TcpStream, UdpSocket};
 use std::time::{Duration, Instant};
 
-use common::daemon::{Daemon, Osc, PERIOD, PROTOS, UNIVERSES, int, msg, string};
-
-const GAP: Duration = Duration::from_millis(2 * PERIOD.as_millis() as u64);
+use common::daemon::{Daemon, GAP, Osc, PROTOS, UNIVERSES, int, msg, string};
 
 /// What one load run measured.
 #[derive(Debug)]
@@ -198,15 +196,7 @@ fn load(name: &str, flood: Flood, secs: u64, rate: u64, tcp: usize) -> Report {
     let r = d.ok("/vo/ping", vec![string("after")], "/vo/pong");
     assert_eq!(r.args, [string("after")]);
     let rss_after_kib = d.rss_kib();
-    let wait_end = Instant::now() + Duration::from_secs(5);
-    while !PROTOS.iter().all(|&p| {
-        UNIVERSES
-            .iter()
-            .all(|&u| !d.wire.frames(p, u, end).is_empty())
-    }) {
-        assert!(Instant::now() < wait_end, "no frames after the load");
-        std::thread::sleep(Duration::from_millis(5));
-    }
+    d.wire.wait_frames_after(end, "the load");
     let mut max_gap = Duration::ZERO;
     let mut frames = 0usize;
     for p in PROTOS {

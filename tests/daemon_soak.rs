@@ -11,9 +11,7 @@ mod common;
 
 use std::time::{Duration, Instant};
 
-use common::daemon::{Daemon, Osc, PERIOD, PROTOS, RATE_HZ, UNIVERSES, float, int, num, string};
-
-const GAP: Duration = Duration::from_millis(2 * PERIOD.as_millis() as u64);
+use common::daemon::{Daemon, GAP, Osc, PROTOS, RATE_HZ, UNIVERSES, float, int, num, string};
 
 #[test]
 #[ignore = "six minutes: run with --ignored"]

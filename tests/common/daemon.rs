@@ -24,6 +24,8 @@ use super::{TestLight, bin, temp_dir, write_png, write_scene};
 pub const RATE_HZ: u32 = 20;
 /// One frame period at [`RATE_HZ`].
 pub const PERIOD: Duration = Duration::from_millis(1000 / RATE_HZ as u64);
+/// The contract's continuity bound: no gap over two frame periods.
+pub const GAP: Duration = Duration::from_millis(2 * PERIOD.as_millis() as u64);
 /// How long a reply or a wire condition is waited for.
 pub const PATIENCE: Duration = Duration::from_secs(5);
 /// How long a generate may take (a debug build on two busy cores).
@@ -909,6 +911,26 @@ impl Wire {
                 );
             }
         }
+    }
+
+    /// Waits (bounded) until every universe on both protocols had a frame after `t`: only
+    /// then does a gap that ends at `t` show.
+    pub fn wait_frames_after(&self, t: Instant, during: &str) {
+        let end = Instant::now() + PATIENCE;
+        while !PROTOS
+            .iter()
+            .all(|&p| UNIVERSES.iter().all(|&u| !self.frames(p, u, t).is_empty()))
+        {
+            assert!(Instant::now() < end, "no frames after {during}");
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    }
+
+    /// Asserts no gap over [`GAP`] from `from` until now, once later frames have arrived.
+    pub fn assert_continuous_since(&self, from: Instant, during: &str) {
+        let to = Instant::now();
+        self.wait_frames_after(to, during);
+        self.assert_continuous(from, to, GAP, during);
     }
 
     /// Waits until both receivers have found their sockets empty after `t`: every packet
