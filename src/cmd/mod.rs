@@ -77,14 +77,9 @@ impl Command {
         }
     }
 
-    fn apply(
-        self,
-        e: &Arc<Engine>,
-        m: &OscMessage,
-        peer: &Peer,
-    ) -> Result<Vec<OscMessage>, String> {
+    fn apply(self, e: &Arc<Engine>, peer: &Peer) -> Result<Vec<OscMessage>, String> {
         match self {
-            Command::Objective(c) => c.apply(e, peer, &m.addr),
+            Command::Objective(c) => c.apply(e),
             Command::Constraint(c) => c.apply(e),
             Command::Generate(c) => c.apply(e, peer),
             Command::Gallery(c) => c.apply(e),
@@ -100,7 +95,7 @@ pub use gallery::sizes as gallery_sizes;
 /// Parses and applies one message: its replies, or the sentence for `/vo/error`.
 pub fn run(e: &Arc<Engine>, m: &OscMessage, peer: &Peer) -> Result<Vec<OscMessage>, String> {
     let req = Request::new(m);
-    Command::parse(&req)?.apply(e, m, peer)
+    Command::parse(&req)?.apply(e, peer)
 }
 
 /// Reads one received packet (a datagram or a stream frame) the way the daemon does, up to

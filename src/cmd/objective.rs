@@ -7,7 +7,6 @@ use rosc::{OscMessage, OscType};
 use super::{int, int_arg, num_arg, rgb_args, text};
 use crate::engine::{Engine, msg};
 use crate::objective::{Aspects, Objective, Region};
-use crate::osc::Peer;
 use crate::osc::args::{self, Request};
 
 pub enum Cmd {
@@ -97,18 +96,9 @@ impl Cmd {
         }))
     }
 
-    pub fn apply(
-        self,
-        e: &Arc<Engine>,
-        peer: &Peer,
-        addr: &str,
-    ) -> Result<Vec<OscMessage>, String> {
+    pub fn apply(self, e: &Arc<Engine>) -> Result<Vec<OscMessage>, String> {
         match self {
-            Cmd::Add { image, aspects } => {
-                // Answered by the reader thread once the image is in.
-                e.add_objective(addr, image, aspects, peer)?;
-                Ok(Vec::new())
-            }
+            Cmd::Add { image, aspects } => Ok(vec![e.add_objective(&image, aspects)?]),
             Cmd::Aspects { id, aspects } => {
                 let mut s = e.session();
                 let (i, id) = find(&s, id)?;

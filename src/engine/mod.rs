@@ -32,26 +32,6 @@ use session::{Gallery, Session};
 /// How long a subscription lasts without a message from its subscriber (osc.md).
 const SUBSCRIPTION: Duration = Duration::from_secs(600);
 
-/// References that may wait to be read at once; further adds are refused until the queue
-/// drains (a flood of adds of a 64-megapixel image must not take all the memory).
-const LOAD_QUEUE: usize = 8;
-
-/// An `/vo/objective/add` waiting for its image to be read.
-struct LoadJob {
-    /// The address as sent, for naming it in an error.
-    addr: String,
-    image: String,
-    aspects: crate::objective::Aspects,
-    peer: Peer,
-}
-
-/// Adds waiting for the reader thread, and whether that thread is running.
-#[derive(Default)]
-struct Loads {
-    queue: std::collections::VecDeque<LoadJob>,
-    running: bool,
-}
-
 /// A client that asked for state changes.
 #[derive(Debug, Clone)]
 struct Subscriber {
@@ -72,7 +52,9 @@ pub struct Engine {
     output: Mutex<Option<Output>>,
     session: Mutex<Session>,
     generating: AtomicBool,
-    loads: Mutex<Loads>,
+    /// Held while a reference is decoded: one at a time, so many senders adding 64-megapixel
+    /// images at once cannot multiply the ~200 MB each decode takes.
+    reading: Mutex<()>,
     /// Generates started in this run (the gallery serial of the next one, minus one).
     generates: AtomicU64,
     /// How many `/vo/entry/<k>/lit` were last pushed, so a smaller gallery turns the
@@ -108,7 +90,7 @@ impl Engine {
             output: Mutex::new(Some(output)),
             session: Mutex::new(session),
             generating: AtomicBool::new(false),
-            loads: Mutex::default(),
+            reading: Mutex::new(()),
             generates: AtomicU64::new(0),
             lit_span: AtomicUsize::new(0),
             writer: Writer::start(files.clone())?,
@@ -182,8 +164,7 @@ impl Engine {
     }
 
     /// Reads and analyses a reference image from the references folder, refusing paths
-    /// that lead outside it (absolute paths, `..`, links). Slow for a big image: call it off
-    /// the OSC receive task ([`Engine::add_objective`]).
+    /// that lead outside it (absolute paths, `..`, links). Slow for a big image.
     pub fn load_reference(
         &self,
         name: &str,
@@ -203,73 +184,19 @@ impl Engine {
         })
     }
 
-    /// Queues `/vo/objective/add` for the reader thread, which reads the image, adds the
-    /// objective and answers `peer` (`/vo/objective/added` or `/vo/error` naming `addr`).
-    /// Decoding a large image takes a second or more: on the OSC receive task it would hold
-    /// up every other sender's messages. Adds are read one at a time, in order.
+    /// Reads a reference and adds it as an objective (durably); its `/vo/objective/added`.
+    /// Runs on the sender's own handling thread, so a slow decode holds up only that
+    /// sender, whose later messages (a generate, say) then see the new objective.
     pub fn add_objective(
-        self: &Arc<Self>,
-        addr: &str,
-        image: String,
+        &self,
+        image: &str,
         aspects: crate::objective::Aspects,
-        peer: &Peer,
-    ) -> Result<(), String> {
-        let mut loads = self.loads.lock().unwrap_or_else(|p| p.into_inner());
-        if loads.queue.len() >= LOAD_QUEUE {
-            return Err(format!(
-                "{LOAD_QUEUE} reference images are already waiting to be read; add {image} again once they are in"
-            ));
-        }
-        if !loads.running {
-            let engine = Arc::clone(self);
-            std::thread::Builder::new()
-                .name("references".into())
-                .spawn(move || engine.read_references())
-                .map_err(|e| format!("cannot start reading {image}: {e}"))?;
-            loads.running = true;
-        }
-        loads.queue.push_back(LoadJob {
-            addr: addr.to_string(),
-            image,
-            aspects,
-            peer: peer.clone(),
-        });
-        Ok(())
-    }
-
-    /// The reader thread: answers queued adds until the queue is empty.
-    fn read_references(&self) {
-        loop {
-            let job = {
-                let mut loads = self.loads.lock().unwrap_or_else(|p| p.into_inner());
-                match loads.queue.pop_front() {
-                    Some(job) => job,
-                    None => {
-                        loads.running = false;
-                        return;
-                    }
-                }
-            };
-            // A decoder or analysis panic must not end the thread: the queue would stall.
-            let loaded = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                self.load_reference(&job.image, job.aspects)
-            }))
-            .unwrap_or_else(|_| {
-                tracing::error!("reading {} panicked", job.image);
-                Err(format!(
-                    "{} could not be read (internal error; see the daemon's log)",
-                    job.image
-                ))
-            });
-            let reply = match loaded {
-                Ok(objective) => self.install_objective(objective),
-                Err(e) => {
-                    tracing::info!("{} from {}: {e}", job.addr, job.peer.addr());
-                    error(&job.addr, &e)
-                }
-            };
-            job.peer.reply(&[reply]);
-        }
+    ) -> Result<OscMessage, String> {
+        let objective = {
+            let _one_at_a_time = self.reading.lock().unwrap_or_else(|p| p.into_inner());
+            self.load_reference(image, aspects)?
+        };
+        Ok(self.install_objective(objective))
     }
 
     /// Adds a read objective to the session (durably); its `/vo/objective/added`.
