@@ -4,6 +4,7 @@
 //! and/or its colour palette, aimed at a region of the stage. Analysis is pure; only
 //! [`decode_reference`] touches the file system.
 
+use std::ops::Range;
 use std::path::Path;
 
 use rand::{Rng, RngExt, SeedableRng};
@@ -128,9 +129,20 @@ impl Region {
 
     /// Whether pixel (x, y) of a `w x h` grid has its centre inside.
     pub fn contains_pixel(&self, x: usize, y: usize, w: usize, h: usize) -> bool {
-        let cx = (x as f32 + 0.5) / w as f32;
-        let cy = (y as f32 + 0.5) / h as f32;
-        cx >= self.x0 && cx < self.x1 && cy >= self.y0 && cy < self.y1
+        centre_within(x, w, self.x0, self.x1) && centre_within(y, h, self.y0, self.y1)
+    }
+
+    /// The columns and rows of a `w x h` grid whose pixels have their centres inside
+    /// (exactly the pixels [`Region::contains_pixel`] accepts), for sums over the region.
+    pub fn pixel_spans(&self, w: usize, h: usize) -> (Range<usize>, Range<usize>) {
+        let span = |n: usize, v0: f32, v1: f32| {
+            let first = (0..n).find(|&i| centre_within(i, n, v0, v1)).unwrap_or(n);
+            first
+                ..(first..n)
+                    .find(|&i| !centre_within(i, n, v0, v1))
+                    .unwrap_or(n)
+        };
+        (span(w, self.x0, self.x1), span(h, self.y0, self.y1))
     }
 
     /// The pixel rectangle `[x0, x1) x [y0, y1)` it covers on a `w x h` grid (at least 1x1).
@@ -474,4 +486,10 @@ impl ObjectiveRecord {
             },
         })
     }
+}
+
+/// Whether the centre of cell `i` of `n` along an axis lies in `v0..v1` (fractions).
+fn centre_within(i: usize, n: usize, v0: f32, v1: f32) -> bool {
+    let c = (i as f32 + 0.5) / n as f32;
+    c >= v0 && c < v1
 }

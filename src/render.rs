@@ -26,6 +26,35 @@ const TASK_STRIPS: usize = 8;
 /// One light's strip of one channel.
 type Row = [f32; STRIP];
 
+/// A row on cache-line boundaries (384 bytes is six lines), so no load of the kernel
+/// straddles two lines.
+#[derive(Clone, Copy)]
+#[repr(C, align(64))]
+struct Line(Row);
+
+impl Line {
+    fn rows_mut(lines: &mut [Line]) -> &mut [Row] {
+        // SAFETY: `Line` is a `repr(C)` wrapper of one `Row` whose size (384) is a multiple of
+        // its alignment, so a slice of lines is laid out exactly as a slice of rows.
+        unsafe { std::slice::from_raw_parts_mut(lines.as_mut_ptr().cast::<Row>(), lines.len()) }
+    }
+}
+
+/// A register block's sums in memory, and whether the next kernel call adds to them (a
+/// later chunk of lights) or starts afresh.
+#[derive(Clone, Copy)]
+struct Acc {
+    sums: [[f32; STRIP]; MR],
+    add: bool,
+}
+
+impl Acc {
+    const ZERO: Acc = Acc {
+        sums: [[0.0; STRIP]; MR],
+        add: false,
+    };
+}
+
 /// Linear gain of an exposure in stops.
 pub fn exposure_gain(stops: f32) -> f32 {
     stops.exp2()
@@ -82,17 +111,11 @@ impl Kernel {
         }
     }
 
-    /// Computes one register block: `acc[r][p] = sum over active l of w[l][r] * b[l][p]`.
+    /// Computes one register block: `acc[r][p] = sum over active l of w[l][r] * b[l][p]`,
+    /// added to what `acc` holds when `add` (the lights of an earlier chunk), else from zero.
     /// While it runs, the kernel asks for the cache lines of `ahead` (the next strip's
     /// panel), one per light, so memory streams in under the arithmetic.
-    fn block(
-        self,
-        w: &[[f32; MR]],
-        b: &[Row],
-        active: &[u32],
-        acc: &mut [[f32; STRIP]; MR],
-        ahead: Ahead,
-    ) {
+    fn block(self, w: &[[f32; MR]], b: &[Row], active: &[u32], acc: &mut Acc, ahead: Ahead) {
         match self {
             #[cfg(target_arch = "x86_64")]
             // SAFETY: `composite_with` only runs kernels whose `supported()` is true.
@@ -127,9 +150,12 @@ impl Ahead {
     }
 }
 
-fn block_portable(w: &[[f32; MR]], b: &[Row], active: &[u32], acc: &mut [[f32; STRIP]; MR]) {
-    for a in acc.iter_mut() {
-        a.fill(0.0);
+fn block_portable(w: &[[f32; MR]], b: &[Row], active: &[u32], acc: &mut Acc) {
+    let (add, acc) = (acc.add, &mut acc.sums);
+    if !add {
+        for a in acc.iter_mut() {
+            a.fill(0.0);
+        }
     }
     for &l in active {
         let (row, ws) = (&b[l as usize], &w[l as usize]);
@@ -147,7 +173,7 @@ mod x86 {
 
     use half::f16;
 
-    use super::{Ahead, MR, Row, STRIP};
+    use super::{Acc, Ahead, MR, Row, STRIP};
 
     /// 4 candidates x 96 pixels in 24 zmm accumulators; per light 6 loads, 4 broadcasts,
     /// 24 FMAs.
@@ -156,11 +182,19 @@ mod x86 {
         w: &[[f32; MR]],
         b: &[Row],
         active: &[u32],
-        acc: &mut [[f32; STRIP]; MR],
+        acc: &mut Acc,
         ahead: Ahead,
     ) {
         const V: usize = STRIP / 16;
         let mut c = [[_mm512_setzero_ps(); V]; MR];
+        if acc.add {
+            for (c, a) in c.iter_mut().zip(&acc.sums) {
+                for (j, c) in c.iter_mut().enumerate() {
+                    // SAFETY: `a` holds STRIP floats; lanes 16j..16j+16 are inside.
+                    *c = unsafe { _mm512_loadu_ps(a.as_ptr().add(16 * j)) };
+                }
+            }
+        }
         for (i, &l) in active.iter().enumerate() {
             ahead.touch(i);
             let (row, ws) = (&b[l as usize], &w[l as usize]);
@@ -176,7 +210,7 @@ mod x86 {
                 }
             }
         }
-        for (a, c) in acc.iter_mut().zip(&c) {
+        for (a, c) in acc.sums.iter_mut().zip(&c) {
             for (j, &c) in c.iter().enumerate() {
                 // SAFETY: `a` holds STRIP floats; lanes 16j..16j+16 are inside.
                 unsafe { _mm512_storeu_ps(a.as_mut_ptr().add(16 * j), c) };
@@ -190,7 +224,7 @@ mod x86 {
         w: &[[f32; MR]],
         b: &[Row],
         active: &[u32],
-        acc: &mut [[f32; STRIP]; MR],
+        acc: &mut Acc,
         ahead: Ahead,
     ) {
         const V: usize = 3;
@@ -198,6 +232,14 @@ mod x86 {
         for part in 0..PARTS {
             let off = part * 8 * V;
             let mut c = [[_mm256_setzero_ps(); V]; MR];
+            if acc.add {
+                for (c, a) in c.iter_mut().zip(&acc.sums) {
+                    for (j, c) in c.iter_mut().enumerate() {
+                        // SAFETY: off + 8 * V <= STRIP floats of `a`.
+                        *c = unsafe { _mm256_loadu_ps(a.as_ptr().add(off + 8 * j)) };
+                    }
+                }
+            }
             for (i, &l) in active.iter().enumerate() {
                 ahead.touch(i * PARTS + part);
                 let (row, ws) = (&b[l as usize][off..off + 8 * V], &w[l as usize]);
@@ -213,7 +255,7 @@ mod x86 {
                     }
                 }
             }
-            for (a, c) in acc.iter_mut().zip(&c) {
+            for (a, c) in acc.sums.iter_mut().zip(&c) {
                 let a = &mut a[off..off + 8 * V];
                 for (j, &c) in c.iter().enumerate() {
                     // SAFETY: `a` holds 8 * V floats; lanes 8j..8j+8 are inside.
@@ -323,6 +365,28 @@ mod x86 {
         dst[body..n].copy_from_slice(&src[body..n]);
     }
 
+    /// [`stream_copy`] a whole cache line per store: the lines `dst` covers completely get
+    /// one 64-byte non-temporal store each, a quarter of the stores (the partial lines at
+    /// the ends are written normally: a neighbouring strip owns the rest of them).
+    #[target_feature(enable = "avx512f")]
+    pub(super) fn stream_copy_avx512(dst: &mut [f32], src: &[f32]) {
+        let n = dst.len().min(src.len());
+        let head = dst.as_ptr().align_offset(64).min(n);
+        let body = head + (n - head) / 16 * 16;
+        dst[..head].copy_from_slice(&src[..head]);
+        for i in (head..body).step_by(16) {
+            // SAFETY: i + 16 <= body <= n, both slices hold n floats, and `dst + i` is
+            // 64-byte aligned (i - head is a multiple of 16 floats).
+            unsafe {
+                _mm512_stream_ps(
+                    dst.as_mut_ptr().add(i),
+                    _mm512_loadu_ps(src.as_ptr().add(i)),
+                );
+            }
+        }
+        dst[body..n].copy_from_slice(&src[body..n]);
+    }
+
     /// Orders this thread's non-temporal stores before whatever it does next (rayon's
     /// join then publishes them).
     pub(super) fn store_fence() {
@@ -384,7 +448,12 @@ pub fn composite_clamped(
             px[2] = rgb[2][i].clamp(0.0, 1.0);
         }
         #[cfg(target_arch = "x86_64")]
-        x86::stream_copy(out, &buf);
+        if kernel == Kernel::Avx512 {
+            // SAFETY: as above.
+            unsafe { x86::stream_copy_avx512(out, &buf) };
+        } else {
+            x86::stream_copy(out, &buf);
+        }
         #[cfg(not(target_arch = "x86_64"))]
         out.copy_from_slice(&buf[..out.len()]);
     });
@@ -402,17 +471,42 @@ pub fn composite_with<O: Send>(
     outputs: &mut [Vec<O>],
     emit: impl Fn([&[f32]; 3], &mut [O]) + Sync,
 ) {
+    composite_chunked(kernel, basis, weights, outputs, CHUNK_LIGHTS, emit);
+}
+
+/// Lights per chunk of a strip's panel: 48 x 96 floats (18 KB) stay in L1 while a group of
+/// register blocks runs over them; the sums of a larger rig are carried from chunk to chunk
+/// in memory (GEMM's K-blocking).
+const CHUNK_LIGHTS: usize = 48;
+/// Register blocks per group: the group's sums (4 x 3 channels x 1.5 KB) stay in L1 beside
+/// a chunk until the group's candidates are emitted.
+const GROUP: usize = 4;
+
+/// [`composite_with`] with the lights cut into chunks of `chunk` (tests use small ones).
+fn composite_chunked<O: Send>(
+    kernel: Kernel,
+    basis: &BasisImages,
+    weights: &[Vec<[f32; 3]>],
+    outputs: &mut [Vec<O>],
+    chunk: usize,
+    emit: impl Fn([&[f32]; 3], &mut [O]) + Sync,
+) {
     assert!(kernel.supported(), "{kernel:?} does not run on this CPU");
     let (pixels, lights) = (basis.pixels(), basis.lights);
     assert!(outputs.iter().all(|o| o.len() == pixels * 3));
     assert!(weights.iter().all(|w| w.len() >= lights));
     let cands = weights.len().min(outputs.len());
-    if cands == 0 || pixels == 0 {
+    if cands == 0 || pixels == 0 || lights == 0 {
         return;
     }
     // Weights per channel and block of MR candidates, `[light][candidate]` (missing
-    // candidates weigh 0), and per block the lights that contribute at all.
+    // candidates weigh 0), and per block and chunk the lights (numbered within the chunk)
+    // that contribute at all.
     let blocks = cands.div_ceil(MR);
+    let chunks: Vec<std::ops::Range<usize>> = (0..lights)
+        .step_by(chunk.max(1))
+        .map(|l| l..(l + chunk.max(1)).min(lights))
+        .collect();
     let packed: Vec<Vec<[f32; MR]>> = (0..3 * blocks)
         .map(|i| {
             let (ch, blk) = (i / blocks, i % blocks);
@@ -423,15 +517,19 @@ pub fn composite_with<O: Send>(
                 .collect()
         })
         .collect();
-    let active: Vec<Vec<u32>> = packed
+    let active: Vec<Vec<Vec<u32>>> = packed
         .iter()
         .map(|w| {
-            (0..lights as u32)
-                .filter(|&l| w[l as usize] != [0.0; MR])
+            chunks
+                .iter()
+                .map(|c| {
+                    (0..c.len() as u32)
+                        .filter(|&l| w[c.start + l as usize] != [0.0; MR])
+                        .collect()
+                })
                 .collect()
         })
         .collect();
-
     let strips = pixels.div_ceil(STRIP);
     let threads = rayon::current_num_threads().max(1);
     let task_strips = (strips / (8 * threads)).clamp(1, TASK_STRIPS);
@@ -444,10 +542,11 @@ pub fn composite_with<O: Send>(
             tasks[t].push(chunk);
         }
     }
+    // Kernel calls per strip, over which the next strip's prefetch is shared out.
+    let calls = blocks * 3 * chunks.len();
     tasks.into_par_iter().enumerate().for_each(|(t, mut outs)| {
-        PANEL.with_borrow_mut(|panel| {
-            panel.resize(3 * lights, [0.0; STRIP]);
-            let acc = &mut [[[0.0f32; STRIP]; MR]; 3];
+        SCRATCH.with_borrow_mut(|(panel, accs)| {
+            accs.resize(3 * GROUP, Acc::ZERO);
             for s in 0..task_strips {
                 let start = t * task_px + s * STRIP;
                 if start >= pixels {
@@ -458,33 +557,50 @@ pub fn composite_with<O: Send>(
                 let rows: &[Row] = match basis.panel(strip) {
                     Panel::Single(p) => p.as_chunks().0,
                     Panel::Half(p) => {
-                        widen(kernel, p, panel);
-                        panel
+                        panel.resize(3 * lights, Line([0.0; STRIP]));
+                        let rows = Line::rows_mut(panel);
+                        widen(kernel, p, rows);
+                        rows
                     }
                 };
-                // The next strip's panel, shared out over this strip's kernel calls.
-                let next = match (strip + 1 < basis.strips()).then(|| basis.panel(strip + 1)) {
+                let next = match (strip + 1 < strips).then(|| basis.panel(strip + 1)) {
                     Some(Panel::Single(p)) => (p.as_ptr().cast::<u8>(), size_of_val(p)),
                     Some(Panel::Half(p)) => (p.as_ptr().cast::<u8>(), size_of_val(p)),
                     None => (std::ptr::null(), 0),
                 };
-                let per_call = next.1.div_ceil(64).div_ceil(3 * blocks);
+                let lines = next.1.div_ceil(64);
+                let per_call = lines.div_ceil(calls);
+                let mut call = 0;
                 let local = s * STRIP * 3..(s * STRIP + len) * 3;
-                for blk in 0..blocks {
-                    for (ch, acc) in acc.iter_mut().enumerate() {
-                        let i = ch * blocks + blk;
-                        let call = blk * 3 + ch;
-                        let ahead = Ahead {
-                            start: next.0.wrapping_add(call * per_call * 64),
-                            lines: per_call
-                                .min(next.1.div_ceil(64).saturating_sub(call * per_call)),
-                        };
-                        let b = &rows[ch * lights..(ch + 1) * lights];
-                        kernel.block(&packed[i], b, &active[i], acc, ahead);
+                for first in (0..blocks).step_by(GROUP) {
+                    let group = first..(first + GROUP).min(blocks);
+                    for ch in 0..3 {
+                        for (k, range) in chunks.iter().enumerate() {
+                            let b = &rows[ch * lights + range.start..ch * lights + range.end];
+                            for blk in group.clone() {
+                                let i = ch * blocks + blk;
+                                let ahead = Ahead {
+                                    start: next.0.wrapping_add(call * per_call * 64),
+                                    lines: per_call.min(lines.saturating_sub(call * per_call)),
+                                };
+                                call += 1;
+                                let acc = &mut accs[(blk - first) * 3 + ch];
+                                acc.add = k > 0;
+                                let w = &packed[i][range.clone()];
+                                kernel.block(w, b, &active[i][k], acc, ahead);
+                            }
+                        }
                     }
-                    for r in 0..MR.min(cands - blk * MR) {
-                        let rgb = [&acc[0][r][..len], &acc[1][r][..len], &acc[2][r][..len]];
-                        emit(rgb, &mut outs[blk * MR + r][local.clone()]);
+                    for blk in group {
+                        let acc = &accs[(blk - first) * 3..(blk - first) * 3 + 3];
+                        for r in 0..MR.min(cands - blk * MR) {
+                            let rgb = [
+                                &acc[0].sums[r][..len],
+                                &acc[1].sums[r][..len],
+                                &acc[2].sums[r][..len],
+                            ];
+                            emit(rgb, &mut outs[blk * MR + r][local.clone()]);
+                        }
                     }
                 }
             }
@@ -499,9 +615,11 @@ pub fn composite_with<O: Send>(
 }
 
 thread_local! {
-    /// Each thread's half-to-single conversion buffer for one strip's panel, kept between
-    /// renders (a few hundred KB; allocating and zeroing it per task showed in profiles).
-    static PANEL: std::cell::RefCell<Vec<Row>> = const { std::cell::RefCell::new(Vec::new()) };
+    /// Each thread's half-to-single conversion buffer for one strip's panel and the sums of
+    /// a group of register blocks, kept between renders (allocating and
+    /// zeroing them per task showed in profiles).
+    static SCRATCH: std::cell::RefCell<(Vec<Line>, Vec<Acc>)> =
+        const { std::cell::RefCell::new((Vec::new(), Vec::new())) };
 }
 
 /// `n` zeroed output buffers of `len`, zeroed on all threads (the allocator usually hands
@@ -556,13 +674,14 @@ mod tests {
         (w, h, lights, planes)
     }
 
-    /// 9 looks (not a multiple of the register block); light 2 off in all but the last.
+    /// 21 looks: more than a group of register blocks, and not a multiple of a block;
+    /// light 2 off in all but the last.
     fn looks(lights: usize) -> Vec<Look> {
-        (0..9)
+        (0..21)
             .map(|k| Look {
                 levels: (0..lights)
                     .map(|l| Level {
-                        intensity: if l == 2 && k < 8 {
+                        intensity: if l == 2 && k < 20 {
                             0.0
                         } else {
                             ((k * 31 + l * 17) % 100) as f32 / 100.0
@@ -574,14 +693,22 @@ mod tests {
             .collect()
     }
 
+    /// Checks a kernel with every light in one chunk and with the lights cut into chunks
+    /// of 3 (7 lights: a partial last chunk; light 2 contributes in one block only).
     fn check(kernel: Kernel, precision: Precision) {
+        for chunk in [CHUNK_LIGHTS, 3] {
+            check_chunked(kernel, precision, chunk);
+        }
+    }
+
+    fn check_chunked(kernel: Kernel, precision: Precision, chunk: usize) {
         let (w, h, lights, planes) = planes();
         let basis = BasisImages::from_planes(w, h, lights, &planes, precision);
         let looks = looks(lights);
         let refs: Vec<&Look> = looks.iter().collect();
         let wts = weights(&refs, 0.7);
         let mut raw: Vec<Vec<f32>> = looks.iter().map(|_| vec![0.0; w * h * 3]).collect();
-        composite_with(kernel, &basis, &wts, &mut raw, |rgb, out| {
+        composite_chunked(kernel, &basis, &wts, &mut raw, chunk, |rgb, out| {
             for (i, px) in out.chunks_exact_mut(3).enumerate() {
                 px.copy_from_slice(&[rgb[0][i], rgb[1][i], rgb[2][i]]);
             }
@@ -593,7 +720,7 @@ mod tests {
             for (i, &v) in want.iter().enumerate() {
                 assert!(
                     (raw[k][i] - v).abs() <= 1e-4 * v.max(1.0),
-                    "{kernel:?} {precision:?} look {k} sample {i}: {} vs {v}",
+                    "{kernel:?} {precision:?} chunk {chunk} look {k} sample {i}: {} vs {v}",
                     raw[k][i]
                 );
                 assert!((clamped[k][i] - v.clamp(0.0, 1.0)).abs() <= 1e-4);

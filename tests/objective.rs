@@ -105,3 +105,28 @@ fn regions_are_validated() {
         Region::new(0.0, 0.0, 0.5, 1.0).unwrap()
     );
 }
+
+#[test]
+fn pixel_spans_hold_exactly_the_pixels_a_region_contains() {
+    for (x0, y0, x1, y1) in [
+        (0.0, 0.0, 1.0, 1.0),
+        (0.0, 0.0, 0.25, 1.0),
+        (0.3, 0.6, 0.7, 0.9),
+        (0.51, 0.02, 0.52, 0.03),
+        (0.9, 0.9, 1.0, 1.0),
+    ] {
+        let region = Region::new(x0, y0, x1, y1).unwrap();
+        for (w, h) in [(128, 72), (40, 20), (7, 3)] {
+            let (xs, ys) = region.pixel_spans(w, h);
+            for y in 0..h {
+                for x in 0..w {
+                    assert_eq!(
+                        xs.contains(&x) && ys.contains(&y),
+                        region.contains_pixel(x, y, w, h),
+                        "{region:?} on {w}x{h} at ({x}, {y})"
+                    );
+                }
+            }
+        }
+    }
+}

@@ -8,10 +8,11 @@ use std::time::{Duration, Instant};
 use anyhow::Context;
 use rand::{RngExt, SeedableRng};
 
+use crate::color::encode_srgb8_planar;
 use crate::look::{Level, Look};
 use crate::objective::{Aspects, Objective, Region, analyze, decode_reference};
 use crate::output::{Output, OutputConfig, SacnDest};
-use crate::render::{Kernel, composite_clamped, weights};
+use crate::render::{Kernel, composite_clamped, composite_with, weights};
 use crate::sampler::{Constraints, Spread};
 use crate::stage::{GenerateRequest, Stage, THUMB_WIDTH};
 
@@ -61,24 +62,31 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
     let mut rows = Vec::new();
     for (name, stage) in [("44", &demo), ("267", &big)] {
-        // Every kernel this CPU runs, the dispatched one last (it is the row with a target).
+        // Every kernel this CPU runs, the dispatched one last: its thumbnail row is the one
+        // with a target (what a generate renders), its linear-float row is for comparison.
         let others = Kernel::ALL
             .into_iter()
             .filter(|k| k.supported() && *k != kernel);
-        for k in others.filter(|_| !args.quick).chain([kernel]) {
+        let runs = others
+            .filter(|_| !args.quick)
+            .map(|k| (k, Product::Thumbnails))
+            .chain([(kernel, Product::Thumbnails), (kernel, Product::Linear)]);
+        for (k, product) in runs {
             // The machine is shared: measure the bound next to each row, so that both
             // see the same competition for the cores.
             let bound = flop_bound(kernel).max(bound);
-            let flops = compositor(stage, k, reps);
+            let flops = compositor(stage, k, product, reps);
             rows.push(Row {
                 name: format!(
-                    "compositor [{k:?}], {name} lights, {}x{}, 100 candidates",
-                    stage.thumbs.width, stage.thumbs.height
+                    "compositor [{k:?}], {name} lights, {}x{}, 100 {}",
+                    stage.thumbs.width,
+                    stage.thumbs.height,
+                    product.describe()
                 ),
                 value: flops / 1e9,
                 unit: "GFLOP/s",
                 ratio: flops / bound,
-                target: (k == kernel).then_some(0.6),
+                target: (k == kernel && product == Product::Thumbnails).then_some(0.6),
                 more: true,
             });
         }
@@ -122,7 +130,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let _ = std::fs::remove_dir_all(&dir);
 
     println!(
-        "{:<64} {:>16} {:>6} {:>7}",
+        "{:<72} {:>16} {:>6} {:>7}",
         "measure", "value", "ratio", "target"
     );
     for r in &rows {
@@ -135,7 +143,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             format!("{}{t:.2}", if r.more { ">=" } else { "<=" })
         });
         println!(
-            "{:<64} {:>16} {:>6.2} {target:>7} {verdict}",
+            "{:<72} {:>16} {:>6.2} {target:>7} {verdict}",
             r.name,
             format!("{:.2} {}", r.value, r.unit),
             r.ratio,
@@ -279,8 +287,26 @@ mod peak {
     }
 }
 
-/// Median FLOP rate of 100 random candidates rendered to clamped linear RGB.
-fn compositor(stage: &Stage, kernel: Kernel, reps: usize) -> f64 {
+/// What the compositor's output is turned into.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Product {
+    /// 8-bit sRGB, as gallery thumbnails are rendered.
+    Thumbnails,
+    /// Linear RGB clamped to 0..1, as 32-bit floats (four times the bytes to write).
+    Linear,
+}
+
+impl Product {
+    fn describe(self) -> &'static str {
+        match self {
+            Product::Thumbnails => "8-bit sRGB thumbnails",
+            Product::Linear => "linear float images",
+        }
+    }
+}
+
+/// Median FLOP rate of 100 random candidates rendered to `product`.
+fn compositor(stage: &Stage, kernel: Kernel, product: Product, reps: usize) -> f64 {
     let basis = &stage.thumbs;
     let mut rng = Rng::seed_from_u64(7);
     let looks: Vec<Look> = (0..100)
@@ -295,16 +321,24 @@ fn compositor(stage: &Stage, kernel: Kernel, reps: usize) -> f64 {
         .collect();
     let refs: Vec<&Look> = looks.iter().collect();
     let w = weights(&refs, stage.gain);
-    let mut outs: Vec<Vec<f32>> = looks
-        .iter()
-        .map(|_| vec![0.0; basis.pixels() * 3])
-        .collect();
-    composite_clamped(kernel, basis, &w, &mut outs); // warm-up: page faults, panels
+    let len = basis.pixels() * 3;
+    let (mut bytes, mut floats) = (Vec::new(), Vec::new());
+    let mut render = || match product {
+        Product::Thumbnails => {
+            bytes.resize_with(looks.len(), || vec![0u8; len]);
+            composite_with(kernel, basis, &w, &mut bytes, encode_srgb8_planar);
+        }
+        Product::Linear => {
+            floats.resize_with(looks.len(), || vec![0f32; len]);
+            composite_clamped(kernel, basis, &w, &mut floats);
+        }
+    };
+    render(); // warm-up: page faults, panels
     let flops = 2.0 * 3.0 * (basis.lights * basis.pixels() * looks.len()) as f64;
     let mut times: Vec<f64> = (0..reps)
         .map(|_| {
             let started = Instant::now();
-            composite_clamped(kernel, basis, &w, &mut outs);
+            render();
             started.elapsed().as_secs_f64()
         })
         .collect();
