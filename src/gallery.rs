@@ -286,3 +286,52 @@ pub fn generate(
         thumbnails: Vec::new(),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A proxy of `pixels` pixels with Lab values spread over -100..100.
+    fn proxy(pixels: usize, seed: u64) -> Vec<f32> {
+        let mut s = seed;
+        (0..3 * pixels)
+            .map(|_| {
+                s = s
+                    .wrapping_mul(6_364_136_223_846_793_005)
+                    .wrapping_add(1_442_695_040_888_963_407);
+                (s >> 40) as f32 / (1u64 << 24) as f32 * 200.0 - 100.0
+            })
+            .collect()
+    }
+
+    #[test]
+    fn mean_delta_e_matches_an_f64_reference_and_every_path() {
+        // Whole strips, a partial last strip, and groups that are not whole 16s.
+        for pixels in [0, 1, 17, STRIP, 8160, 8160 + 37] {
+            let (a, b) = (proxy(pixels, 1), proxy(pixels, 2));
+            let mut sum = 0.0f64;
+            for (p, q) in a.chunks(3 * STRIP).zip(b.chunks(3 * STRIP)) {
+                let len = p.len() / 3;
+                for i in 0..len {
+                    let d = |k: usize| p[k * len + i] as f64 - q[k * len + i] as f64;
+                    sum += (d(0).powi(2) + d(1).powi(2) + d(2).powi(2)).sqrt();
+                }
+            }
+            let want = sum / pixels.max(1) as f64;
+            let got = mean_delta_e(&a, &b);
+            assert!(
+                (got as f64 - want).abs() <= 1e-5 * want,
+                "{pixels} pixels: {got} vs {want}"
+            );
+            // The same value on every CPU.
+            assert_eq!(got.to_bits(), mean_delta_e_lanes(&a, &b).to_bits());
+            #[cfg(target_arch = "x86_64")]
+            if is_x86_feature_detected!("avx2") {
+                // SAFETY: AVX2 was just detected.
+                let avx2 = unsafe { mean_delta_e_avx2(&a, &b) };
+                assert_eq!(got.to_bits(), avx2.to_bits());
+            }
+            assert_eq!(mean_delta_e(&a, &a), 0.0);
+        }
+    }
+}
