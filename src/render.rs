@@ -2,11 +2,12 @@
 //!
 //! A render is `out[pixel] = gain * sum over lights of multiplier[light] * basis[light][pixel]`
 //! per channel, so rendering C candidates is a matrix product (C x lights) x (lights x
-//! pixels) per channel. The batched compositor cuts the pixels into strips of [`STRIP`],
-//! packs every light's strip into a contiguous L2-resident panel once, and runs a register
-//! blocked micro-kernel (4 candidates x 96 pixels) over it for every group of candidates, so
-//! the basis is read from memory once per batch and the FMA units stay busy. The kernel is
-//! picked at run time ([`Kernel::detect`]): AVX-512, AVX2+FMA, or portable code.
+//! pixels) per channel. The batched compositor cuts the pixels into strips of [`STRIP`]
+//! (the basis is stored strip by strip), and for each strip runs a register-blocked
+//! micro-kernel (4 candidates x 96 pixels) over chunks of lights small enough to stay in L1,
+//! for groups of candidates whose sums stay in L1 too, so the basis is read from memory once
+//! per batch and the FMA units stay busy. The kernel is picked at run time
+//! ([`Kernel::detect`]): AVX-512, AVX2+FMA, or portable code.
 
 use half::f16;
 use half::slice::HalfFloatSliceExt;
