@@ -33,10 +33,14 @@ type Row = [f32; STRIP];
 #[repr(C, align(64))]
 struct Line(Row);
 
+// A line adds no padding to its row: the cast in `rows_mut` relies on it.
+const _: () = assert!(size_of::<Line>() == size_of::<Row>());
+
 impl Line {
+    /// The lines as the kernel's plain rows.
     fn rows_mut(lines: &mut [Line]) -> &mut [Row] {
-        // SAFETY: `Line` is a `repr(C)` wrapper of one `Row` whose size (384) is a multiple of
-        // its alignment, so a slice of lines is laid out exactly as a slice of rows.
+        // SAFETY: `Line` is a `repr(C)` wrapper of one `Row` with no padding (asserted above),
+        // so a slice of lines is laid out exactly as a slice of rows.
         unsafe { std::slice::from_raw_parts_mut(lines.as_mut_ptr().cast::<Row>(), lines.len()) }
     }
 }
@@ -617,8 +621,8 @@ fn composite_chunked<O: Send>(
 
 thread_local! {
     /// Each thread's half-to-single conversion buffer for one strip's panel and the sums of
-    /// a group of register blocks, kept between renders (allocating and
-    /// zeroing them per task showed in profiles).
+    /// a group of register blocks, kept between renders (allocating and zeroing them per
+    /// task showed in profiles).
     static SCRATCH: std::cell::RefCell<(Vec<Line>, Vec<Acc>)> =
         const { std::cell::RefCell::new((Vec::new(), Vec::new())) };
 }
