@@ -355,3 +355,36 @@ fn sigterm_terminates_every_sacn_universe_three_times() {
         );
     }
 }
+
+/// Per thread of `pid`: its name and nice value, from /proc.
+fn threads(pid: u32) -> Vec<(String, i64)> {
+    let tasks = std::fs::read_dir(format!("/proc/{pid}/task")).expect("/proc task list");
+    tasks
+        .filter_map(|t| {
+            let dir = t.ok()?.path();
+            let name = std::fs::read_to_string(dir.join("comm")).ok()?;
+            let stat = std::fs::read_to_string(dir.join("stat")).ok()?;
+            // Fields after the parenthesised name; nice is the 19th field, 17th after it.
+            let nice = stat.rsplit(')').next()?.split_whitespace().nth(16)?;
+            Some((name.trim().to_string(), nice.parse().ok()?))
+        })
+        .collect()
+}
+
+#[test]
+fn compute_threads_yield_to_the_dmx_clock() {
+    let mut d = Daemon::start("dmx-priority");
+    d.add_objective("warm.png", "both");
+    d.generate();
+    let threads = threads(d.pid());
+    let compute: Vec<_> = threads
+        .iter()
+        .filter(|(name, _)| name.starts_with("compute-"))
+        .collect();
+    assert!(!compute.is_empty(), "no compute threads in {threads:?}");
+    for (name, nice) in &compute {
+        assert_eq!(*nice, i64::from(visobjd::cli::COMPUTE_NICE), "{name}");
+    }
+    let dmx = threads.iter().find(|(name, _)| name == "dmx-output");
+    assert_eq!(dmx.map(|t| t.1), Some(0), "{threads:?}");
+}

@@ -45,6 +45,40 @@ enum Command {
     Bench(bench::Args),
 }
 
+/// Starts rayon's global pool, which renders and generates run on, with its threads named
+/// `compute-N` and one step down in priority (nice 10): a generate keeps both cores busy,
+/// and the DMX clock and the OSC threads must then get a core the moment they wake, not at
+/// the end of a scheduler slice. Where the pool already runs, or the system refuses the
+/// priority, work carries on as it is (logged).
+fn start_compute_pool() {
+    let built = rayon::ThreadPoolBuilder::new()
+        .thread_name(|i| format!("compute-{i}"))
+        .start_handler(|_| {
+            #[cfg(target_os = "linux")]
+            {
+                // SAFETY: plain system calls on this thread's own id; on Linux the nice
+                // value set through PRIO_PROCESS with a thread id is that thread's alone.
+                let done = unsafe {
+                    let tid = libc::gettid() as libc::id_t;
+                    libc::setpriority(libc::PRIO_PROCESS, tid, COMPUTE_NICE)
+                };
+                if done != 0 {
+                    tracing::warn!(
+                        "compute threads stay at normal priority: {}",
+                        std::io::Error::last_os_error()
+                    );
+                }
+            }
+        })
+        .build_global();
+    if let Err(e) = built {
+        tracing::debug!("compute pool: {e}");
+    }
+}
+
+/// The compute threads' nice value (0 is normal, 19 the lowest).
+pub const COMPUTE_NICE: i32 = 10;
+
 /// Runs the command line; returns the process exit code. User mistakes print one line on
 /// stderr and exit non-zero, never a panic.
 pub fn main() -> std::process::ExitCode {

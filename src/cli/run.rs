@@ -52,6 +52,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     } else {
         logs.init();
     }
+    super::start_compute_pool();
 
     let config = Config::load(&args.config).map_err(anyhow::Error::msg)?;
     let scene = Scene::load(&config.scene)?;
