@@ -127,20 +127,16 @@ impl Region {
         *self == Region::FULL
     }
 
-    /// Whether pixel (x, y) of a `w x h` grid has its centre inside.
-    pub fn contains_pixel(&self, x: usize, y: usize, w: usize, h: usize) -> bool {
-        centre_within(x, w, self.x0, self.x1) && centre_within(y, h, self.y0, self.y1)
-    }
-
-    /// The columns and rows of a `w x h` grid whose pixels have their centres inside
-    /// (exactly the pixels [`Region::contains_pixel`] accepts), for sums over the region.
+    /// The columns and rows of a `w x h` grid whose pixels have their centres inside: the
+    /// pixels a region covers for targeting, as a rectangle to sum over.
     pub fn pixel_spans(&self, w: usize, h: usize) -> (Range<usize>, Range<usize>) {
         let span = |n: usize, v0: f32, v1: f32| {
-            let first = (0..n).find(|&i| centre_within(i, n, v0, v1)).unwrap_or(n);
-            first
-                ..(first..n)
-                    .find(|&i| !centre_within(i, n, v0, v1))
-                    .unwrap_or(n)
+            let within = |i: usize| {
+                let c = (i as f32 + 0.5) / n as f32;
+                c >= v0 && c < v1
+            };
+            let first = (0..n).find(|&i| within(i)).unwrap_or(n);
+            first..(first..n).find(|&i| !within(i)).unwrap_or(n)
         };
         (span(w, self.x0, self.x1), span(h, self.y0, self.y1))
     }
@@ -486,10 +482,4 @@ impl ObjectiveRecord {
             },
         })
     }
-}
-
-/// Whether the centre of cell `i` of `n` along an axis lies in `v0..v1` (fractions).
-fn centre_within(i: usize, n: usize, v0: f32, v1: f32) -> bool {
-    let c = (i as f32 + 0.5) / n as f32;
-    c >= v0 && c < v1
 }

@@ -61,8 +61,9 @@ impl Footprints {
 
     fn inside(&self, region: Region) -> Vec<bool> {
         let (w, h) = (self.width, self.height);
+        let (xs, ys) = region.pixel_spans(w, h);
         (0..w * h)
-            .map(|p| region.contains_pixel(p % w, p / w, w, h))
+            .map(|p| xs.contains(&(p % w)) && ys.contains(&(p / w)))
             .collect()
     }
 
