@@ -355,41 +355,45 @@ mod x86 {
         groups * 16
     }
 
-    /// Copies `src` into `dst` with non-temporal stores for the 16-byte aligned middle:
-    /// outputs written once and read much later should not evict the basis panel.
-    pub(super) fn stream_copy(dst: &mut [f32], src: &[f32]) {
+    /// Copies `src` into `dst`, the middle of `dst` (aligned to `LANES` floats) with
+    /// `store`, a non-temporal store of `LANES` floats: outputs written once and read much
+    /// later should not evict the basis panel. The ends are copied normally (a neighbouring
+    /// strip owns the rest of their cache lines).
+    ///
+    /// # Safety
+    /// `store(d, s)` must be sound wherever `d` is aligned to `LANES` floats and `LANES`
+    /// floats are writable at `d` and readable at `s`.
+    #[inline(always)]
+    unsafe fn stream_lanes<const LANES: usize>(
+        dst: &mut [f32],
+        src: &[f32],
+        store: impl Fn(*mut f32, *const f32),
+    ) {
         let n = dst.len().min(src.len());
-        let head = dst.as_ptr().align_offset(16).min(n);
-        let body = head + (n - head) / 4 * 4;
+        let head = dst.as_ptr().align_offset(4 * LANES).min(n);
+        let body = head + (n - head) / LANES * LANES;
         dst[..head].copy_from_slice(&src[..head]);
-        for i in (head..body).step_by(4) {
-            // SAFETY: i + 4 <= body <= n, both slices hold n floats, and `dst + i` is
-            // 16-byte aligned (i - head is a multiple of 4 floats). SSE is baseline x86-64.
-            unsafe { _mm_stream_ps(dst.as_mut_ptr().add(i), _mm_loadu_ps(src.as_ptr().add(i))) };
+        for i in (head..body).step_by(LANES) {
+            // i + LANES <= body <= n, both slices hold n floats, and `dst + i` is aligned
+            // (i - head is a multiple of LANES floats): `store`'s contract holds.
+            store(dst[i..].as_mut_ptr(), src[i..].as_ptr());
         }
         dst[body..n].copy_from_slice(&src[body..n]);
     }
 
-    /// [`stream_copy`] a whole cache line per store: the lines `dst` covers completely get
-    /// one 64-byte non-temporal store each, a quarter of the stores (the partial lines at
-    /// the ends are written normally: a neighbouring strip owns the rest of them).
+    /// [`stream_lanes`] with 16-byte SSE stores (baseline x86-64).
+    pub(super) fn stream_copy(dst: &mut [f32], src: &[f32]) {
+        // SAFETY: `_mm_stream_ps` needs the 16-byte alignment stream_lanes::<4> gives, and 4
+        // floats each side, which it guarantees.
+        unsafe { stream_lanes::<4>(dst, src, |d, s| _mm_stream_ps(d, _mm_loadu_ps(s))) }
+    }
+
+    /// [`stream_lanes`] a whole cache line per store: a quarter of the SSE stores.
     #[target_feature(enable = "avx512f")]
     pub(super) fn stream_copy_avx512(dst: &mut [f32], src: &[f32]) {
-        let n = dst.len().min(src.len());
-        let head = dst.as_ptr().align_offset(64).min(n);
-        let body = head + (n - head) / 16 * 16;
-        dst[..head].copy_from_slice(&src[..head]);
-        for i in (head..body).step_by(16) {
-            // SAFETY: i + 16 <= body <= n, both slices hold n floats, and `dst + i` is
-            // 64-byte aligned (i - head is a multiple of 16 floats).
-            unsafe {
-                _mm512_stream_ps(
-                    dst.as_mut_ptr().add(i),
-                    _mm512_loadu_ps(src.as_ptr().add(i)),
-                );
-            }
-        }
-        dst[body..n].copy_from_slice(&src[body..n]);
+        // SAFETY: `_mm512_stream_ps` needs the 64-byte alignment stream_lanes::<16> gives,
+        // and 16 floats each side, which it guarantees.
+        unsafe { stream_lanes::<16>(dst, src, |d, s| _mm512_stream_ps(d, _mm512_loadu_ps(s))) }
     }
 
     /// Orders this thread's non-temporal stores before whatever it does next (rayon's
