@@ -220,6 +220,16 @@ async fn connection(mut stream: TcpStream, from: SocketAddr, shared: &Shared) {
     }
 }
 
+/// Reads at least one byte of `what` into `chunk`: a failed read or an early end is
+/// answered 400.
+async fn read_some(stream: &mut TcpStream, chunk: &mut [u8], what: &str) -> Result<usize, Answer> {
+    match stream.read(chunk).await {
+        Ok(0) => Err(Answer::text(400, &format!("{what} ended early"))),
+        Ok(n) => Ok(n),
+        Err(_) => Err(Answer::text(400, &format!("{what} could not be read"))),
+    }
+}
+
 /// Reads one request within the size limits; the error is the answer to give.
 async fn read_request(stream: &mut TcpStream) -> Result<Request, Answer> {
     let mut buf = Vec::with_capacity(1024);
@@ -232,13 +242,7 @@ async fn read_request(stream: &mut TcpStream) -> Result<Request, Answer> {
         if let Some(end) = end {
             break end;
         }
-        let n = stream
-            .read(&mut chunk)
-            .await
-            .map_err(|_| Answer::text(400, "the request could not be read"))?;
-        if n == 0 {
-            return Err(Answer::text(400, "the request ended early"));
-        }
+        let n = read_some(stream, &mut chunk, "the request").await?;
         buf.extend_from_slice(&chunk[..n]);
     };
     let head = std::str::from_utf8(&buf[..head_end])
@@ -265,14 +269,7 @@ async fn read_request(stream: &mut TcpStream) -> Result<Request, Answer> {
     // The body is read (and ignored) so closing the connection does not reset it.
     let mut have = buf.len() - head_end;
     while have < length {
-        let n = stream
-            .read(&mut chunk)
-            .await
-            .map_err(|_| Answer::text(400, "the request body could not be read"))?;
-        if n == 0 {
-            return Err(Answer::text(400, "the request body ended early"));
-        }
-        have += n;
+        have += read_some(stream, &mut chunk, "the request body").await?;
     }
     Ok(Request {
         method: method.to_string(),
