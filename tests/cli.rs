@@ -19,6 +19,12 @@ fn s(p: &Path) -> &str {
     p.to_str().expect("utf-8 temp path")
 }
 
+/// Asserts the command succeeded, showing its stderr if not.
+fn succeeded(out: &Output) {
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+}
+
 /// Asserts a clean failure: non-zero, one line on stderr mentioning `needle`, no panic.
 fn fails_with(out: &Output, needle: &str) {
     let err = String::from_utf8_lossy(&out.stderr);
@@ -56,11 +62,7 @@ fn render(dir: &Path, scene: &Path, look_json: &str) -> image::RgbImage {
         "--out",
         s(&png),
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    succeeded(&out);
     image::open(&png).unwrap().to_rgb8()
 }
 
@@ -86,11 +88,7 @@ fn gallery_writes_a_numbered_contact_sheet_and_every_candidate() {
         s(&json),
     ];
     let out = run(&args);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    succeeded(&out);
     let g: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
     assert_eq!(g["seed"], 7);
     assert_eq!(g["scene"], "test scene");
@@ -129,7 +127,7 @@ fn gallery_writes_a_numbered_contact_sheet_and_every_candidate() {
     let mut again = args.to_vec();
     let n = again.len();
     again[n - 1] = s(&json2);
-    assert!(run(&again).status.success());
+    succeeded(&run(&again));
     assert_eq!(
         std::fs::read(&json).unwrap(),
         std::fs::read(&json2).unwrap()
@@ -167,11 +165,7 @@ fn gallery_takes_several_references_each_with_its_region() {
         "--json",
         s(&json),
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    succeeded(&out);
     let g: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
     assert_eq!(g["objectives"][0]["aspects"], "intensity");
     assert_eq!(
@@ -334,11 +328,7 @@ fn check_summarises_a_clean_scene_and_refuses_a_broken_one() {
     let config = dir.join("config/visobjd.toml");
     std::fs::write(&config, "scene = \"../scene\"\n[[output.sacn]]\n").unwrap();
     let out = run(&["check", "--config", s(&config)]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    succeeded(&out);
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.contains("6 in 6 groups, channels 1-6"), "{text}");
     assert!(text.contains("dimmer x3, irgb x3"), "{text}");
@@ -417,11 +407,7 @@ fn check_fits_a_small_screen_and_names_the_web_gallery_and_console() {
     )
     .unwrap();
     let out = run(&["check", "--config", s(&config)]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    succeeded(&out);
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(
         text.contains("http     web gallery on http://127.0.0.1:8080/"),
