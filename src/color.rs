@@ -185,121 +185,222 @@ pub fn srgb8_to_linear_table() -> &'static [f32; 256] {
     TABLE.get_or_init(|| std::array::from_fn(|i| srgb_to_linear(i as f32 / 255.0)))
 }
 
-/// Resolution of [`encode_srgb8`]'s table: fine enough that every 8-bit code is reachable
-/// and the result matches exact encoding to within one code.
-const ENCODE_STEPS: usize = 1 << 14;
+/// Below this linear value every sRGB code is 0 (255 x 12.92 x 2^-16 = 0.05): the bottom
+/// of the encoder's segments.
+const ENCODE_MIN: f32 = 1.0 / 65536.0;
+/// The largest float below 1 (its code is 255): the top of the encoder's segments.
+const ENCODE_MAX: f32 = 1.0 - 1.0 / 16_777_216.0;
 
-/// [`encode_srgb8`]'s table: entry i is the code of linear i / ENCODE_STEPS, then padding,
-/// so the SIMD paths may read 4 bytes at any index up to ENCODE_STEPS.
-fn encode_table() -> &'static [u8; ENCODE_STEPS + 4] {
-    static TABLE: std::sync::OnceLock<[u8; ENCODE_STEPS + 4]> = std::sync::OnceLock::new();
+/// [`encode_srgb8`]'s lookup table: 255 x sRGB(v) as one cubic in v per half octave of v.
+/// A clamped value's float bits >> 22 (exponent and first mantissa bit) name its half
+/// octave; ENCODE_MIN..1 is 32 of them, so the low 5 bits index the table, and one
+/// in-register permute per coefficient reads 16 lanes at once (no gathers). Coefficients
+/// are `[c0, c1, c2, c3][segment]`, fitted in f64 at Chebyshev nodes: within 0.003 codes of
+/// exact sRGB everywhere.
+fn encode_cubics() -> &'static [[f32; 32]; 4] {
+    static TABLE: std::sync::OnceLock<[[f32; 32]; 4]> = std::sync::OnceLock::new();
     TABLE.get_or_init(|| {
-        std::array::from_fn(|i| {
-            let v = i.min(ENCODE_STEPS) as f32 / ENCODE_STEPS as f32;
-            (linear_to_srgb(v) * 255.0).round() as u8
-        })
+        let exact = |v: f64| 255.0 * linear_to_srgb_f64(v);
+        let mut table = [[0.0f32; 32]; 4];
+        let first = ENCODE_MIN.to_bits() >> 22;
+        for half_octave in first..first + 32 {
+            let lo = f64::from(f32::from_bits(half_octave << 22));
+            let hi = f64::from(f32::from_bits((half_octave + 1) << 22));
+            let nodes: [f64; 4] = std::array::from_fn(|k| {
+                let t = ((2 * k + 1) as f64 * std::f64::consts::PI / 8.0).cos();
+                (lo + hi) / 2.0 + (hi - lo) / 2.0 * t
+            });
+            let cubic = interpolate_cubic(nodes, nodes.map(exact));
+            for (row, c) in table.iter_mut().zip(cubic) {
+                row[(half_octave % 32) as usize] = c as f32;
+            }
+        }
+        table
     })
 }
 
-/// Linear light to 8-bit sRGB through a table (clamps to 0..1): the compositor's hot path.
-#[inline]
-pub fn encode_srgb8(v: f32) -> u8 {
-    encode_with(encode_table(), v)
-}
-
-#[inline(always)]
-fn encode_with(table: &[u8; ENCODE_STEPS + 4], v: f32) -> u8 {
-    // NaN and negatives clamp to 0 (`as usize` saturates).
-    let i = (v * ENCODE_STEPS as f32 + 0.5) as usize;
-    table[i.min(ENCODE_STEPS)]
-}
-
-/// [`encode_srgb8`] of planar `[R, G, B]` samples into interleaved `out` (`3 * n` long),
-/// the same codes bit for bit. With AVX-512 or AVX2 the table is read with gathers, 16 or
-/// 8 pixels at a time, and the codes interleaved in registers: scalar lookups were most of
-/// the cost.
-pub fn encode_srgb8_planar(rgb: [&[f32]; 3], out: &mut [u8]) {
-    let table = encode_table();
-    let n = out.len() / 3;
-    let rgb = rgb.map(|p| &p[..n]);
-    #[cfg(target_arch = "x86_64")]
-    let done = if is_x86_feature_detected!("avx512f") {
-        // SAFETY: AVX-512F was just detected.
-        unsafe { x86::encode_avx512(table, rgb, out) }
-    } else if is_x86_feature_detected!("avx2") {
-        // SAFETY: AVX2 was just detected.
-        unsafe { x86::encode_avx2(table, rgb, out) }
+/// The exact sRGB encoding in f64, for fitting and testing the fast encoder.
+fn linear_to_srgb_f64(v: f64) -> f64 {
+    if v <= 0.003_130_8 {
+        12.92 * v
     } else {
-        0
-    };
-    #[cfg(not(target_arch = "x86_64"))]
-    let done = 0;
-    encode_portable(table, rgb.map(|p| &p[done..]), &mut out[3 * done..]);
-}
-
-/// Table indices in a vectorisable pass, then scalar lookups.
-fn encode_portable(table: &[u8; ENCODE_STEPS + 4], rgb: [&[f32]; 3], out: &mut [u8]) {
-    const CHUNK: usize = 64;
-    for (c, px) in out.chunks_mut(3 * CHUNK).enumerate() {
-        let n = px.len() / 3;
-        let mut idx = [[0u32; CHUNK]; 3];
-        for (idx, plane) in idx.iter_mut().zip(rgb) {
-            for (i, &v) in idx.iter_mut().zip(&plane[c * CHUNK..c * CHUNK + n]) {
-                // max() maps NaN to 0, as encode_with's saturating cast does; clamp()
-                // would keep NaN.
-                #[allow(clippy::manual_clamp)]
-                let t = v.max(0.0).min(1.0) * ENCODE_STEPS as f32 + 0.5;
-                // SAFETY: t is finite and in 0.5..=ENCODE_STEPS + 0.5, so it fits a u32;
-                // the unchecked cast lets the loop vectorise.
-                *i = unsafe { t.to_int_unchecked::<u32>() };
-            }
-        }
-        for (i, px) in px.chunks_exact_mut(3).enumerate() {
-            for (o, idx) in px.iter_mut().zip(&idx) {
-                *o = table[(idx[i] as usize).min(ENCODE_STEPS)];
-            }
-        }
+        1.055 * v.powf(1.0 / 2.4) - 0.055
     }
 }
 
-/// The SIMD encoders: each does whole vectors of pixels and returns how many it did. A
-/// pixel's codes are first one word [R, G, B, 0]; the 3 out words of each group of 4 pixels
-/// p are then p[m] >> 8m | p[m + 1] << (24 - 8m) for m = 0, 1, 2: two permutes and two
-/// variable shifts for a whole vector, and a masked store of 3/4 of it.
+/// Coefficients (constant term first) of the cubic through four points: Gauss-Jordan on
+/// the Vandermonde system, with partial pivoting.
+fn interpolate_cubic(x: [f64; 4], y: [f64; 4]) -> [f64; 4] {
+    let mut m: [[f64; 5]; 4] =
+        std::array::from_fn(|r| [1.0, x[r], x[r] * x[r], x[r] * x[r] * x[r], y[r]]);
+    for col in 0..4 {
+        let pivot = (col..4)
+            .max_by(|&a, &b| m[a][col].abs().total_cmp(&m[b][col].abs()))
+            .unwrap_or(col);
+        m.swap(col, pivot);
+        for r in (0..4).filter(|&r| r != col) {
+            let f = m[r][col] / m[col][col];
+            let pivot_row = m[col];
+            for (a, p) in m[r].iter_mut().zip(pivot_row) {
+                *a -= f * p;
+            }
+        }
+    }
+    std::array::from_fn(|k| m[k][4] / m[k][k])
+}
+
+/// Linear light (clamped to 0..1; NaN is 0) to 8-bit sRGB, rounded to nearest: exact but
+/// within 0.003 codes of a rounding tie. The compositor's hot path; every SIMD path of
+/// [`encode_srgb8_planar`] computes the same fused multiply-adds, so gives the same codes.
+#[inline]
+pub fn encode_srgb8(v: f32) -> u8 {
+    let c = encode_cubics();
+    // max() returns its other operand for NaN, as the SIMD max does with the order used;
+    // clamp() would keep NaN.
+    #[allow(clippy::manual_clamp)]
+    let v = v.max(ENCODE_MIN).min(ENCODE_MAX);
+    let s = (v.to_bits() >> 22) as usize % 32;
+    let y = c[3][s]
+        .mul_add(v, c[2][s])
+        .mul_add(v, c[1][s])
+        .mul_add(v, c[0][s]);
+    // y is within -0.5..255.5 (the fit is that close to 0.05..255), so the cast is exact.
+    y.round_ties_even() as u8
+}
+
+/// [`encode_srgb8`] of planar `[R, G, B]` samples into interleaved `out` (`3 * n` long),
+/// the same codes bit for bit, 16 or 8 pixels at a time with AVX-512 or AVX2.
+pub fn encode_srgb8_planar(rgb: [&[f32]; 3], out: &mut [u8]) {
+    let n = out.len() / 3;
+    let rgb = rgb.map(|p| &p[..n]);
+    #[cfg(target_arch = "x86_64")]
+    let done = x86::encode(rgb, out);
+    #[cfg(not(target_arch = "x86_64"))]
+    let done = 0;
+    for (i, px) in out.chunks_exact_mut(3).enumerate().skip(done) {
+        px[0] = encode_srgb8(rgb[0][i]);
+        px[1] = encode_srgb8(rgb[1][i]);
+        px[2] = encode_srgb8(rgb[2][i]);
+    }
+}
+
+/// The SIMD encoders: each does whole vectors of pixels and returns how many it did.
 #[cfg(target_arch = "x86_64")]
 mod x86 {
     use std::arch::x86_64::*;
 
-    use super::ENCODE_STEPS;
+    use super::{ENCODE_MAX, ENCODE_MIN, encode_cubics};
+
+    /// The widest encoder this CPU runs; returns the pixels it did.
+    pub(super) fn encode(rgb: [&[f32]; 3], out: &mut [u8]) -> usize {
+        if is_x86_feature_detected!("avx512vbmi") && is_x86_feature_detected!("avx512bw") {
+            // SAFETY: AVX-512 VBMI and BW (which imply F) were just detected.
+            unsafe { encode_avx512_vbmi(rgb, out) }
+        } else if is_x86_feature_detected!("avx512f") {
+            // SAFETY: AVX-512F was just detected.
+            unsafe { encode_avx512(rgb, out) }
+        } else if is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma") {
+            // SAFETY: AVX2 and FMA were just detected.
+            unsafe { encode_avx2(rgb, out) }
+        } else {
+            0
+        }
+    }
+
+    /// The cubic table in registers: `[coefficient][segments 0..16, 16..32]`.
+    type Cubics = [[__m512; 2]; 4];
 
     #[target_feature(enable = "avx512f")]
-    pub(super) fn encode_avx512(
-        table: &[u8; ENCODE_STEPS + 4],
-        rgb: [&[f32]; 3],
-        out: &mut [u8],
-    ) -> usize {
+    fn cubics_avx512() -> Cubics {
+        let table = encode_cubics();
+        // SAFETY: each table row holds 32 floats: lanes 0..16 and 16..32 are inside.
+        std::array::from_fn(|k| unsafe {
+            [
+                _mm512_loadu_ps(table[k].as_ptr()),
+                _mm512_loadu_ps(table[k].as_ptr().add(16)),
+            ]
+        })
+    }
+
+    /// 16 codes of `plane[i..i + 16]`, one per 32-bit lane: [`super::encode_srgb8`] with
+    /// two-table permutes for the coefficient lookups.
+    #[target_feature(enable = "avx512f")]
+    fn codes_avx512(c: &Cubics, plane: &[f32], i: usize) -> __m512i {
+        assert!(i + 16 <= plane.len());
+        // SAFETY: lanes i..i + 16 of `plane` are inside (asserted).
+        let v = unsafe { _mm512_loadu_ps(plane.as_ptr().add(i)) };
+        // max() returns its second operand for NaN: NaN becomes ENCODE_MIN, as in the scalar.
+        let v = _mm512_max_ps(v, _mm512_set1_ps(ENCODE_MIN));
+        let v = _mm512_min_ps(v, _mm512_set1_ps(ENCODE_MAX));
+        let s = _mm512_srli_epi32::<22>(_mm512_castps_si512(v));
+        let k = |j: usize| _mm512_permutex2var_ps(c[j][0], s, c[j][1]);
+        let y = _mm512_fmadd_ps(k(3), v, k(2));
+        let y = _mm512_fmadd_ps(y, v, k(1));
+        _mm512_cvtps_epi32(_mm512_fmadd_ps(y, v, k(0)))
+    }
+
+    /// Where output byte k of a group of 16 pixels (pixel k / 3, channel k % 3) comes from in
+    /// the codes (4 bytes a pixel): first R (0..64) or G (64..128), then B (64..128) laid
+    /// over the blue bytes (the others keep their place). Bytes 48..64 are not stored.
+    const fn interleave_bytes(blue: bool) -> [u8; 64] {
+        let mut idx = [0u8; 64];
+        let mut k = 0;
+        while k < 48 {
+            let (p, c) = ((4 * (k / 3)) as u8, k % 3);
+            idx[k] = match (blue, c) {
+                (false, 0) => p,
+                (false, 1) => 64 + p,
+                (false, _) => 0,
+                (true, 2) => 64 + p,
+                (true, _) => k as u8,
+            };
+            k += 1;
+        }
+        idx
+    }
+
+    /// With VBMI the codes interleave with two byte permutes per 16 pixels.
+    #[target_feature(enable = "avx512f,avx512bw,avx512vbmi")]
+    fn encode_avx512_vbmi(rgb: [&[f32]; 3], out: &mut [u8]) -> usize {
+        const RG: [u8; 64] = interleave_bytes(false);
+        const B: [u8; 64] = interleave_bytes(true);
         let n = rgb.iter().fold(out.len() / 3, |n, p| n.min(p.len())) / 16 * 16;
-        let code = |plane: &[f32], i: usize| {
-            // SAFETY: i + 16 <= n <= plane.len().
-            let v = unsafe { _mm512_loadu_ps(plane.as_ptr().add(i)) };
-            // max() returns its second operand for NaN, so NaN maps to 0 like encode_with.
-            let v = _mm512_min_ps(_mm512_max_ps(v, _mm512_setzero_ps()), _mm512_set1_ps(1.0));
-            let t = _mm512_mul_ps(v, _mm512_set1_ps(ENCODE_STEPS as f32));
-            let idx = _mm512_cvttps_epi32(_mm512_add_ps(t, _mm512_set1_ps(0.5)));
-            // SAFETY: idx is in 0..=ENCODE_STEPS, so each 4-byte read is inside the table.
-            let word = unsafe { _mm512_i32gather_epi32::<1>(idx, table.as_ptr().cast()) };
-            _mm512_and_si512(word, _mm512_set1_epi32(0xFF))
+        let c = cubics_avx512();
+        // SAFETY: the index tables are 64-byte constants, read by value.
+        let (rg, b) = unsafe {
+            (
+                _mm512_loadu_si512(RG.as_ptr().cast()),
+                _mm512_loadu_si512(B.as_ptr().cast()),
+            )
         };
+        for i in (0..n).step_by(16) {
+            let [r, g, bl] = rgb.map(|plane| codes_avx512(&c, plane, i));
+            let o = _mm512_permutex2var_epi8(_mm512_permutex2var_epi8(r, rg, g), b, bl);
+            // SAFETY: the 48 bytes stored are out[3i..3i + 48], inside out.
+            unsafe {
+                _mm512_mask_storeu_epi8(out.as_mut_ptr().add(3 * i).cast(), (1 << 48) - 1, o)
+            };
+        }
+        n
+    }
+
+    /// Without VBMI a pixel's codes are first one word [R, G, B, 0]; the 3 out words of each
+    /// group of 4 pixels p are then p[m] >> 8m | p[m + 1] << (24 - 8m) for m = 0, 1, 2: two
+    /// permutes and two variable shifts for a whole vector, and a masked store of 3/4 of it.
+    #[target_feature(enable = "avx512f")]
+    fn encode_avx512(rgb: [&[f32]; 3], out: &mut [u8]) -> usize {
+        let n = rgb.iter().fold(out.len() / 3, |n, p| n.min(p.len())) / 16 * 16;
+        let c = cubics_avx512();
         let lo = _mm512_setr_epi32(0, 1, 2, 4, 5, 6, 8, 9, 10, 12, 13, 14, 0, 0, 0, 0);
         let hi = _mm512_add_epi32(lo, _mm512_set1_epi32(1));
         let right = _mm512_setr_epi32(0, 8, 16, 0, 8, 16, 0, 8, 16, 0, 8, 16, 0, 0, 0, 0);
         let left = _mm512_sub_epi32(_mm512_set1_epi32(24), right);
         for i in (0..n).step_by(16) {
-            let gb = _mm512_or_si512(
-                _mm512_slli_epi32::<8>(code(rgb[1], i)),
-                _mm512_slli_epi32::<16>(code(rgb[2], i)),
+            let [r, g, b] = rgb.map(|plane| codes_avx512(&c, plane, i));
+            let px = _mm512_or_si512(
+                r,
+                _mm512_or_si512(_mm512_slli_epi32::<8>(g), _mm512_slli_epi32::<16>(b)),
             );
-            let px = _mm512_or_si512(code(rgb[0], i), gb);
             let words = _mm512_or_si512(
                 _mm512_srlv_epi32(_mm512_permutexvar_epi32(lo, px), right),
                 _mm512_sllv_epi32(_mm512_permutexvar_epi32(hi, px), left),
@@ -310,23 +411,27 @@ mod x86 {
         n
     }
 
-    #[target_feature(enable = "avx2")]
-    pub(super) fn encode_avx2(
-        table: &[u8; ENCODE_STEPS + 4],
-        rgb: [&[f32]; 3],
-        out: &mut [u8],
-    ) -> usize {
+    /// 8 lanes; AVX2 has no two-table permute, so the coefficients are gathered from the
+    /// (cache-resident) table.
+    #[target_feature(enable = "avx2,fma")]
+    fn encode_avx2(rgb: [&[f32]; 3], out: &mut [u8]) -> usize {
         let n = rgb.iter().fold(out.len() / 3, |n, p| n.min(p.len())) / 8 * 8;
+        let table = encode_cubics();
         let code = |plane: &[f32], i: usize| {
             // SAFETY: i + 8 <= n <= plane.len().
             let v = unsafe { _mm256_loadu_ps(plane.as_ptr().add(i)) };
-            // max() returns its second operand for NaN, so NaN maps to 0 like encode_with.
-            let v = _mm256_min_ps(_mm256_max_ps(v, _mm256_setzero_ps()), _mm256_set1_ps(1.0));
-            let t = _mm256_mul_ps(v, _mm256_set1_ps(ENCODE_STEPS as f32));
-            let idx = _mm256_cvttps_epi32(_mm256_add_ps(t, _mm256_set1_ps(0.5)));
-            // SAFETY: idx is in 0..=ENCODE_STEPS, so each 4-byte read is inside the table.
-            let word = unsafe { _mm256_i32gather_epi32::<1>(table.as_ptr().cast(), idx) };
-            _mm256_and_si256(word, _mm256_set1_epi32(0xFF))
+            // max() returns its second operand for NaN: NaN becomes ENCODE_MIN.
+            let v = _mm256_max_ps(v, _mm256_set1_ps(ENCODE_MIN));
+            let v = _mm256_min_ps(v, _mm256_set1_ps(ENCODE_MAX));
+            let s = _mm256_and_si256(
+                _mm256_srli_epi32::<22>(_mm256_castps_si256(v)),
+                _mm256_set1_epi32(31),
+            );
+            // SAFETY: s is in 0..32, and each table row holds 32 floats.
+            let k = |j: usize| unsafe { _mm256_i32gather_ps::<4>(table[j].as_ptr(), s) };
+            let y = _mm256_fmadd_ps(k(3), v, k(2));
+            let y = _mm256_fmadd_ps(y, v, k(1));
+            _mm256_cvtps_epi32(_mm256_fmadd_ps(y, v, k(0)))
         };
         let lo = _mm256_setr_epi32(0, 1, 2, 4, 5, 6, 0, 0);
         let hi = _mm256_add_epi32(lo, _mm256_set1_epi32(1));
@@ -347,6 +452,38 @@ mod x86 {
             unsafe { _mm256_maskstore_epi32(out.as_mut_ptr().add(3 * i).cast(), six, words) };
         }
         n
+    }
+
+    #[cfg(test)]
+    pub(super) type Path = unsafe fn([&[f32]; 3], &mut [u8]) -> usize;
+
+    /// Every SIMD path this CPU runs, with its lanes, for tests.
+    #[cfg(test)]
+    pub(super) fn paths() -> Vec<(usize, Path)> {
+        let have = |f: &[bool]| f.iter().all(|&b| b);
+        let all: [(bool, usize, Path); 3] = [
+            (
+                have(&[
+                    is_x86_feature_detected!("avx512vbmi"),
+                    is_x86_feature_detected!("avx512bw"),
+                ]),
+                16,
+                encode_avx512_vbmi,
+            ),
+            (is_x86_feature_detected!("avx512f"), 16, encode_avx512),
+            (
+                have(&[
+                    is_x86_feature_detected!("avx2"),
+                    is_x86_feature_detected!("fma"),
+                ]),
+                8,
+                encode_avx2,
+            ),
+        ];
+        all.into_iter()
+            .filter(|p| p.0)
+            .map(|p| (p.1, p.2))
+            .collect()
     }
 }
 
@@ -446,6 +583,34 @@ mod tests {
         }
     }
 
+    /// Every 61st float in 0..1 (16 million), the segment ends, and out-of-range values:
+    /// the code is exact sRGB rounding unless the exact value is within 0.003 of a tie,
+    /// and then one of the two codes beside it.
+    #[test]
+    fn encoding_rounds_exact_srgb() {
+        let first = ENCODE_MIN.to_bits() >> 22;
+        let ends = (first..=first + 32).map(|h| f32::from_bits(h << 22));
+        for v in (0..=1.0f32.to_bits())
+            .step_by(61)
+            .map(f32::from_bits)
+            .chain(ends)
+        {
+            let exact = 255.0 * linear_to_srgb_f64(f64::from(v));
+            let got = f64::from(encode_srgb8(v));
+            if (exact.fract() - 0.5).abs() < 0.003 {
+                assert!((got - exact).abs() < 0.51, "{v}: {got} for {exact}");
+            } else {
+                assert_eq!(got, exact.round(), "{v}: exact {exact}");
+            }
+        }
+        for (v, want) in [(-1.0, 0), (f32::NAN, 0), (f32::NEG_INFINITY, 0), (1.0, 255)] {
+            assert_eq!(encode_srgb8(v), want, "{v}");
+        }
+        for v in [1.000_001, 7.0, f32::INFINITY, f32::MAX] {
+            assert_eq!(encode_srgb8(v), 255, "{v}");
+        }
+    }
+
     #[test]
     fn planar_encoding_matches_per_sample_encoding() {
         let special = [
@@ -464,9 +629,10 @@ mod tests {
             3 => special[i / 5 % special.len()],
             _ => i as f32 / 250.0 - 0.1,
         };
-        // Every table index and every rounding boundary between two, as one long strip.
-        let sweep: Vec<f32> = (0..=2 * ENCODE_STEPS + 1)
-            .map(|k| k as f32 / (2 * ENCODE_STEPS) as f32)
+        // Both ends of every segment and a few floats either side, as one long strip.
+        let first = ENCODE_MIN.to_bits() >> 22;
+        let sweep: Vec<f32> = (first..=first + 32)
+            .flat_map(|h| (0..8).map(move |d| f32::from_bits((h << 22) + d - 4)))
             .collect();
         let lengths = (0..=70).chain([95, 96, 97, 300, 1000, sweep.len()]);
         for n in lengths {
@@ -485,24 +651,17 @@ mod tests {
             assert_eq!(out, want, "{n} pixels");
             // Each SIMD path on its own: its whole vectors, and not a byte past them.
             #[cfg(target_arch = "x86_64")]
-            {
-                type Path = unsafe fn(&[u8; ENCODE_STEPS + 4], [&[f32]; 3], &mut [u8]) -> usize;
-                let paths: [(bool, usize, Path); 2] = [
-                    (is_x86_feature_detected!("avx512f"), 16, x86::encode_avx512),
-                    (is_x86_feature_detected!("avx2"), 8, x86::encode_avx2),
-                ];
-                for (_, lanes, path) in paths.into_iter().filter(|p| p.0) {
-                    let mut out = vec![0xA5u8; 3 * n];
-                    // SAFETY: the path's features were detected.
-                    let done = unsafe { path(encode_table(), [&r, &g, &b], &mut out) };
-                    assert_eq!(done, n / lanes * lanes);
-                    assert_eq!(
-                        out[..3 * done],
-                        want[..3 * done],
-                        "{n} pixels, {lanes} lanes"
-                    );
-                    assert!(out[3 * done..].iter().all(|&o| o == 0xA5));
-                }
+            for (lanes, path) in x86::paths() {
+                let mut out = vec![0xA5u8; 3 * n];
+                // SAFETY: paths() lists only paths whose features were detected.
+                let done = unsafe { path([&r, &g, &b], &mut out) };
+                assert_eq!(done, n / lanes * lanes);
+                assert_eq!(
+                    out[..3 * done],
+                    want[..3 * done],
+                    "{n} pixels, {lanes} lanes"
+                );
+                assert!(out[3 * done..].iter().all(|&o| o == 0xA5));
             }
         }
     }

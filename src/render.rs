@@ -5,8 +5,8 @@
 //! pixels) per channel. The batched compositor cuts the pixels into strips of [`STRIP`]
 //! (the basis is stored strip by strip), and for each strip runs a register-blocked
 //! micro-kernel (4 candidates x 96 pixels) over chunks of lights small enough to stay in L1,
-//! for groups of candidates whose sums stay in L1 too, so the basis is read from memory once
-//! per batch and the FMA units stay busy. The kernel is picked at run time
+//! for every candidate in turn before the next chunk, so the basis is read from memory once
+//! per batch and each chunk from L1 once per candidate block; the FMA units stay busy. The kernel is picked at run time
 //! ([`Kernel::detect`]): AVX-512, AVX2+FMA, or portable code.
 
 use half::f16;
@@ -483,13 +483,10 @@ pub fn composite_with<O: Send>(
     composite_chunked(kernel, basis, weights, outputs, CHUNK_LIGHTS, emit);
 }
 
-/// Lights per chunk of a strip's panel: 48 x 96 floats (18 KB) stay in L1 while a group of
-/// register blocks runs over them; the sums of a larger rig are carried from chunk to chunk
-/// in memory (GEMM's K-blocking).
-const CHUNK_LIGHTS: usize = 48;
-/// Register blocks per group: the group's sums (4 x 3 channels x 1.5 KB) stay in L1 beside
-/// a chunk until the group's candidates are emitted.
-const GROUP: usize = 4;
+/// Lights per chunk of a strip's panel: 64 x 96 floats (24 KB) stay in L1 while every
+/// register block runs over them; the sums of a larger rig are carried from chunk to chunk
+/// in memory (GEMM's K-blocking; the sums of all candidates, 4.5 KB each, sit in L2).
+const CHUNK_LIGHTS: usize = 64;
 
 /// [`composite_with`] with the lights cut into chunks of `chunk` (tests use small ones).
 fn composite_chunked<O: Send>(
@@ -555,7 +552,7 @@ fn composite_chunked<O: Send>(
     let calls = blocks * 3 * chunks.len();
     tasks.into_par_iter().enumerate().for_each(|(t, mut outs)| {
         SCRATCH.with_borrow_mut(|(panel, accs)| {
-            accs.resize(3 * GROUP, Acc::ZERO);
+            accs.resize(3 * blocks, Acc::ZERO);
             for s in 0..task_strips {
                 let start = t * task_px + s * STRIP;
                 if start >= pixels {
@@ -581,36 +578,26 @@ fn composite_chunked<O: Send>(
                 let per_call = lines.div_ceil(calls);
                 let mut call = 0;
                 let local = s * STRIP * 3..(s * STRIP + len) * 3;
-                for first in (0..blocks).step_by(GROUP) {
-                    let group = first..(first + GROUP).min(blocks);
-                    for ch in 0..3 {
-                        for (k, range) in chunks.iter().enumerate() {
-                            let b = &rows[ch * lights + range.start..ch * lights + range.end];
-                            for blk in group.clone() {
-                                let i = ch * blocks + blk;
-                                let ahead = Ahead {
-                                    start: next.0.wrapping_add(call * per_call * 64),
-                                    lines: per_call.min(lines.saturating_sub(call * per_call)),
-                                };
-                                call += 1;
-                                let acc = &mut accs[(blk - first) * 3 + ch];
-                                acc.add = k > 0;
-                                let w = &packed[i][range.clone()];
-                                kernel.block(w, b, &active[i][k], acc, ahead);
-                            }
+                for ch in 0..3 {
+                    for (k, range) in chunks.iter().enumerate() {
+                        let b = &rows[ch * lights + range.start..ch * lights + range.end];
+                        for blk in 0..blocks {
+                            let i = ch * blocks + blk;
+                            let ahead = Ahead {
+                                start: next.0.wrapping_add(call * per_call * 64),
+                                lines: per_call.min(lines.saturating_sub(call * per_call)),
+                            };
+                            call += 1;
+                            let acc = &mut accs[blk * 3 + ch];
+                            acc.add = k > 0;
+                            let w = &packed[i][range.clone()];
+                            kernel.block(w, b, &active[i][k], acc, ahead);
                         }
                     }
-                    for blk in group {
-                        let acc = &accs[(blk - first) * 3..(blk - first) * 3 + 3];
-                        for r in 0..MR.min(cands - blk * MR) {
-                            let rgb = [
-                                &acc[0].sums[r][..len],
-                                &acc[1].sums[r][..len],
-                                &acc[2].sums[r][..len],
-                            ];
-                            emit(rgb, &mut outs[blk * MR + r][local.clone()]);
-                        }
-                    }
+                }
+                for (c, out) in outs.iter_mut().enumerate() {
+                    let rgb = std::array::from_fn(|ch| &accs[c / MR * 3 + ch].sums[c % MR][..len]);
+                    emit(rgb, &mut out[local.clone()]);
                 }
             }
         });
@@ -625,7 +612,7 @@ fn composite_chunked<O: Send>(
 
 thread_local! {
     /// Each thread's half-to-single conversion buffer for one strip's panel and the sums of
-    /// a group of register blocks, kept between renders (allocating and zeroing them per
+    /// every register block, kept between renders (allocating and zeroing them per
     /// task showed in profiles).
     static SCRATCH: std::cell::RefCell<(Vec<Line>, Vec<Acc>)> =
         const { std::cell::RefCell::new((Vec::new(), Vec::new())) };
@@ -683,7 +670,7 @@ mod tests {
         (w, h, lights, planes)
     }
 
-    /// 21 looks: more than a group of register blocks, and not a multiple of a block;
+    /// 21 looks: several register blocks, the last one partial;
     /// light 2 off in all but the last.
     fn looks(lights: usize) -> Vec<Look> {
         (0..21)
