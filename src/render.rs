@@ -118,8 +118,8 @@ impl Kernel {
 
     /// Computes one register block: `acc[r][p] = sum over active l of w[l][r] * b[l][p]`,
     /// added to what `acc` holds when `add` (the lights of an earlier chunk), else from zero.
-    /// While it runs, the kernel asks for the cache lines of `ahead` (the next strip's
-    /// panel), one per light, so memory streams in under the arithmetic.
+    /// The kernel also asks for the cache lines of `ahead` (its share of the next strip's
+    /// panel), so memory streams in under the arithmetic.
     fn block(self, w: &[[f32; MR]], b: &[Row], active: &[u32], acc: &mut Acc, ahead: Ahead) {
         match self {
             #[cfg(target_arch = "x86_64")]
@@ -142,6 +142,14 @@ struct Ahead {
 }
 
 impl Ahead {
+    /// Asks for every line.
+    #[inline(always)]
+    fn touch_all(self) {
+        for i in 0..self.lines {
+            self.touch(i);
+        }
+    }
+
     /// Asks for line `i` if there is one.
     #[inline(always)]
     fn touch(self, i: usize) {
@@ -200,9 +208,8 @@ mod x86 {
                 }
             }
         }
-        for (i, &l) in active.iter().enumerate() {
-            ahead.touch(i);
-            let (row, ws) = (&b[l as usize], &w[l as usize]);
+        ahead.touch_all();
+        let light = |c: &mut [[__m512; V]; MR], row: &Row, ws: &[f32; MR]| {
             let mut v = [_mm512_setzero_ps(); V];
             for (j, v) in v.iter_mut().enumerate() {
                 // SAFETY: `row` holds STRIP = 16 * V floats; lanes 16j..16j+16 are inside.
@@ -213,6 +220,18 @@ mod x86 {
                 for (c, &v) in c.iter_mut().zip(&v) {
                     *c = _mm512_fmadd_ps(k, v, *c);
                 }
+            }
+        };
+        if active.len() == b.len() {
+            // Every light contributes: walk the rows in order. With no index to load and
+            // check, the loop's few scalar instructions leave the FMA ports to the FMAs
+            // (5-15% faster than the indexed loop in same-run measurements).
+            for (row, ws) in b.iter().zip(w) {
+                light(&mut c, row, ws);
+            }
+        } else {
+            for &l in active {
+                light(&mut c, &b[l as usize], &w[l as usize]);
             }
         }
         for (a, c) in acc.sums.iter_mut().zip(&c) {
@@ -509,9 +528,12 @@ fn composite_chunked<O: Send>(
     // candidates weigh 0), and per block and chunk the lights (numbered within the chunk)
     // that contribute at all.
     let blocks = cands.div_ceil(MR);
+    // Chunks of at most `chunk` lights, of near-equal size: 267 lights are 4 chunks of 54 and
+    // one of 51, not 4 of 64 and one of 11 whose per-call overhead would outweigh its work.
+    let size = lights.div_ceil(lights.div_ceil(chunk.max(1)));
     let chunks: Vec<std::ops::Range<usize>> = (0..lights)
-        .step_by(chunk.max(1))
-        .map(|l| l..(l + chunk.max(1)).min(lights))
+        .step_by(size)
+        .map(|l| l..(l + size).min(lights))
         .collect();
     let packed: Vec<Vec<[f32; MR]>> = (0..3 * blocks)
         .map(|i| {
@@ -592,12 +614,20 @@ fn composite_chunked<O: Send>(
                             acc.add = k > 0;
                             let w = &packed[i][range.clone()];
                             kernel.block(w, b, &active[i][k], acc, ahead);
+                            // The block's sums are final after its last call (blue, last
+                            // chunk): emitting its candidates now lets their encoding overlap
+                            // the next block's multiply-adds in the out-of-order window.
+                            if ch == 2 && k + 1 == chunks.len() {
+                                let cs = blk * MR..(blk * MR + MR).min(cands);
+                                for (c, out) in cs.clone().zip(&mut outs[cs]) {
+                                    let rgb = std::array::from_fn(|ch| {
+                                        &accs[blk * 3 + ch].sums[c % MR][..len]
+                                    });
+                                    emit(rgb, &mut out[local.clone()]);
+                                }
+                            }
                         }
                     }
-                }
-                for (c, out) in outs.iter_mut().enumerate() {
-                    let rgb = std::array::from_fn(|ch| &accs[c / MR * 3 + ch].sums[c % MR][..len]);
-                    emit(rgb, &mut out[local.clone()]);
                 }
             }
         });
