@@ -504,7 +504,9 @@ fn dmx_p99(
                     && n > 115
                     && u16::from_be_bytes([buf[113], buf[114]]) == 1
                 {
-                    arrivals.push(Instant::now());
+                    // The kernel's receive time: this thread competes for the cores with
+                    // the generates, and its own lateness is not the sender's.
+                    arrivals.push(crate::output::kernel_arrival(&receiver, Instant::now()));
                 }
             }
             arrivals

@@ -608,6 +608,27 @@ impl Clock {
     }
 }
 
+/// When the kernel received `sock`'s last packet, as an `Instant` (`now` where the kernel
+/// cannot tell). For receivers that time our frames (the bench, the tests): a receiver
+/// thread that runs late on a busy machine must not make the sender look late.
+pub fn kernel_arrival(sock: &UdpSocket, now: Instant) -> Instant {
+    use std::os::fd::AsRawFd;
+    use std::time::{SystemTime, UNIX_EPOCH};
+    /// Linux's "time stamp of the last packet received" socket ioctl.
+    const SIOCGSTAMP: u64 = 0x8906;
+    let mut tv = libc::timeval {
+        tv_sec: 0,
+        tv_usec: 0,
+    };
+    // SAFETY: SIOCGSTAMP writes one timeval into `tv`, which outlives the call.
+    let r = unsafe { libc::ioctl(sock.as_raw_fd(), SIOCGSTAMP as _, &mut tv) };
+    let stamp = UNIX_EPOCH + Duration::new(tv.tv_sec as u64, tv.tv_usec as u32 * 1000);
+    match SystemTime::now().duration_since(stamp) {
+        Ok(age) if r == 0 && age < Duration::from_secs(5) => now.checked_sub(age).unwrap_or(now),
+        _ => now,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -718,27 +718,6 @@ pub struct Wire {
 /// Art-Net port-address = scene universe + this (config `universe_offset`).
 pub const ARTNET_OFFSET: i32 = -1;
 
-/// When the kernel received the socket's last packet, as an `Instant`, so that a receiver
-/// thread that runs late (a busy test machine) does not make the daemon look late; `now`
-/// where the kernel cannot tell.
-fn kernel_arrival(sock: &UdpSocket, now: Instant) -> Instant {
-    use std::os::fd::AsRawFd;
-    use std::time::{SystemTime, UNIX_EPOCH};
-    /// Linux's "time stamp of the last packet received" socket ioctl.
-    const SIOCGSTAMP: u64 = 0x8906;
-    let mut tv = libc::timeval {
-        tv_sec: 0,
-        tv_usec: 0,
-    };
-    // SAFETY: SIOCGSTAMP writes one timeval into `tv`, which outlives the call.
-    let r = unsafe { libc::ioctl(sock.as_raw_fd(), SIOCGSTAMP as _, &mut tv) };
-    let stamp = UNIX_EPOCH + Duration::new(tv.tv_sec as u64, tv.tv_usec as u32 * 1000);
-    match SystemTime::now().duration_since(stamp) {
-        Ok(age) if r == 0 && age < Duration::from_secs(5) => now.checked_sub(age).unwrap_or(now),
-        _ => now,
-    }
-}
-
 fn decode(proto: Proto, p: &[u8], at: Instant) -> Option<(u16, Frame)> {
     match proto {
         Proto::Sacn => parse_sacn(p).map(|s| {
@@ -794,7 +773,7 @@ impl Wire {
                             log.lock().expect("log").idle.insert(proto, Instant::now());
                             continue;
                         };
-                        let at = kernel_arrival(&sock, Instant::now());
+                        let at = visobjd::output::kernel_arrival(&sock, Instant::now());
                         let p = buf[..n].to_vec();
                         let got = std::panic::catch_unwind(|| decode(proto, &p, at));
                         let mut log = log.lock().expect("log");
