@@ -145,16 +145,8 @@ impl Ahead {
     /// Asks for every line.
     #[inline(always)]
     fn touch_all(self) {
-        for i in 0..self.lines {
-            self.touch(i);
-        }
-    }
-
-    /// Asks for line `i` if there is one.
-    #[inline(always)]
-    fn touch(self, i: usize) {
         #[cfg(target_arch = "x86_64")]
-        if i < self.lines {
+        for i in 0..self.lines {
             use std::arch::x86_64::{_MM_HINT_T1, _mm_prefetch};
             // SAFETY: prefetching is a hint with no effect on memory safety; the address
             // (computed with wrapping arithmetic) is inside the next strip's panel anyway.
@@ -253,6 +245,7 @@ mod x86 {
     ) {
         const V: usize = 3;
         const PARTS: usize = STRIP / (8 * V);
+        ahead.touch_all();
         for part in 0..PARTS {
             let off = part * 8 * V;
             let mut c = [[_mm256_setzero_ps(); V]; MR];
@@ -264,9 +257,8 @@ mod x86 {
                     }
                 }
             }
-            for (i, &l) in active.iter().enumerate() {
-                ahead.touch(i * PARTS + part);
-                let (row, ws) = (&b[l as usize][off..off + 8 * V], &w[l as usize]);
+            let light = |c: &mut [[__m256; V]; MR], row: &Row, ws: &[f32; MR]| {
+                let row = &row[off..off + 8 * V];
                 let mut v = [_mm256_setzero_ps(); V];
                 for (j, v) in v.iter_mut().enumerate() {
                     // SAFETY: `row` holds 8 * V floats; lanes 8j..8j+8 are inside.
@@ -277,6 +269,16 @@ mod x86 {
                     for (c, &v) in c.iter_mut().zip(&v) {
                         *c = _mm256_fmadd_ps(k, v, *c);
                     }
+                }
+            };
+            // As in the AVX-512 kernel: rows in order when every light contributes.
+            if active.len() == b.len() {
+                for (row, ws) in b.iter().zip(w) {
+                    light(&mut c, row, ws);
+                }
+            } else {
+                for &l in active {
+                    light(&mut c, &b[l as usize], &w[l as usize]);
                 }
             }
             for (a, c) in acc.sums.iter_mut().zip(&c) {
