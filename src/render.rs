@@ -5,9 +5,9 @@
 //! pixels) per channel. The batched compositor cuts the pixels into strips of [`STRIP`]
 //! (the basis is stored strip by strip), and for each strip runs a register-blocked
 //! micro-kernel (4 candidates x 96 pixels) over chunks of lights small enough to stay in L1,
-//! for every candidate in turn before the next chunk, so the basis is read from memory once
-//! per batch and each chunk from L1 once per candidate block; the FMA units stay busy. The kernel is picked at run time
-//! ([`Kernel::detect`]): AVX-512, AVX2+FMA, or portable code.
+//! for every block of candidates before the next chunk: the basis is read from memory once
+//! per batch, each chunk from L1 once per block, and the FMA units stay busy. The kernel is
+//! picked at run time ([`Kernel::detect`]): AVX-512, AVX2+FMA, or portable code.
 
 use half::f16;
 use half::slice::HalfFloatSliceExt;
@@ -505,7 +505,7 @@ pub fn composite_with<O: Send>(
 
 /// Lights per chunk of a strip's panel: 64 x 96 floats (24 KB) stay in L1 while every
 /// register block runs over them; the sums of a larger rig are carried from chunk to chunk
-/// in memory (GEMM's K-blocking; the sums of all candidates, 4.5 KB each, sit in L2).
+/// in memory (GEMM's K-blocking; the sums, 4.5 KB a block of 4 candidates, sit in L2).
 const CHUNK_LIGHTS: usize = 64;
 
 /// [`composite_with`] with the lights cut into chunks of `chunk` (tests use small ones).
