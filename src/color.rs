@@ -288,20 +288,11 @@ mod x86 {
 
     /// The widest encoder this CPU runs; returns the pixels it did.
     pub(super) fn encode(rgb: [&[f32]; 3], out: &mut [u8]) -> usize {
-        if is_x86_feature_detected!("avx512f")
-            && is_x86_feature_detected!("avx512bw")
-            && is_x86_feature_detected!("avx512vbmi")
-        {
-            // SAFETY: AVX-512 F, BW and VBMI were just detected.
-            unsafe { encode_avx512_vbmi(rgb, out) }
-        } else if is_x86_feature_detected!("avx512f") {
-            // SAFETY: AVX-512F was just detected.
-            unsafe { encode_avx512(rgb, out) }
-        } else if is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma") {
-            // SAFETY: AVX2 and FMA were just detected.
-            unsafe { encode_avx2(rgb, out) }
-        } else {
-            0
+        static BEST: std::sync::OnceLock<Option<Path>> = std::sync::OnceLock::new();
+        match BEST.get_or_init(|| paths().first().map(|p| p.1)) {
+            // SAFETY: paths() lists only encoders whose features this CPU has.
+            Some(path) => unsafe { path(rgb, out) },
+            None => 0,
         }
     }
 
@@ -452,11 +443,10 @@ mod x86 {
         n
     }
 
-    #[cfg(test)]
+    /// A SIMD encoder: sound to call only where its target features are present.
     pub(super) type Path = unsafe fn([&[f32]; 3], &mut [u8]) -> usize;
 
-    /// Every SIMD path this CPU runs, with its lanes, for tests.
-    #[cfg(test)]
+    /// Every SIMD encoder this CPU runs, widest first, with its lanes.
     pub(super) fn paths() -> Vec<(usize, Path)> {
         let have = |f: &[bool]| f.iter().all(|&b| b);
         let all: [(bool, usize, Path); 3] = [
