@@ -245,20 +245,38 @@ fn interpolate_cubic(x: [f64; 4], y: [f64; 4]) -> [f64; 4] {
 }
 
 /// Linear light (clamped to 0..1; NaN is 0) to 8-bit sRGB, rounded to nearest: exact but
-/// within 0.003 codes of a rounding tie. The compositor's hot path; every SIMD path of
-/// [`encode_srgb8_planar`] computes the same fused multiply-adds, so gives the same codes.
+/// within 0.003 codes of a rounding tie. The compositor's hot path; where the CPU has FMA,
+/// every SIMD path of [`encode_srgb8_planar`] computes the same fused multiply-adds, so
+/// gives the same codes.
 #[inline]
 pub fn encode_srgb8(v: f32) -> u8 {
+    if has_fma() {
+        encode_cubic::<true>(v)
+    } else {
+        encode_cubic::<false>(v)
+    }
+}
+
+/// Whether this CPU fuses multiply-adds: without it `mul_add` is a slow library call (and
+/// there is no SIMD encoder to match), so [`encode_srgb8`] multiplies and adds.
+fn has_fma() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    return cfg!(target_feature = "fma") || is_x86_feature_detected!("fma");
+    #[cfg(not(target_arch = "x86_64"))]
+    true
+}
+
+#[inline(always)]
+fn encode_cubic<const FMA: bool>(v: f32) -> u8 {
     let c = encode_cubics();
     // max() returns its other operand for NaN, as the SIMD max does with the order used;
     // clamp() would keep NaN.
     #[allow(clippy::manual_clamp)]
     let v = v.max(ENCODE_MIN).min(ENCODE_MAX);
     let s = (v.to_bits() >> 22) as usize % 32;
-    let y = c[3][s]
-        .mul_add(v, c[2][s])
-        .mul_add(v, c[1][s])
-        .mul_add(v, c[0][s]);
+    let y = madd::<FMA>(c[3][s], v, c[2][s]);
+    let y = madd::<FMA>(y, v, c[1][s]);
+    let y = madd::<FMA>(y, v, c[0][s]);
     // y is within -0.5..255.5 (the fit is that close to 0.05..255), so the cast is exact.
     y.round_ties_even() as u8
 }
@@ -585,11 +603,13 @@ mod tests {
             .chain(ends)
         {
             let exact = 255.0 * linear_to_srgb_f64(f64::from(v));
-            let got = f64::from(encode_srgb8(v));
-            if (exact.fract() - 0.5).abs() < 0.003 {
-                assert!((got - exact).abs() < 0.51, "{v}: {got} for {exact}");
-            } else {
-                assert_eq!(got, exact.round(), "{v}: exact {exact}");
+            // Both ways of evaluating the cubic: fused, and (CPUs without FMA) not.
+            for got in [encode_cubic::<true>(v), encode_cubic::<false>(v)].map(f64::from) {
+                if (exact.fract() - 0.5).abs() < 0.003 {
+                    assert!((got - exact).abs() < 0.51, "{v}: {got} for {exact}");
+                } else {
+                    assert_eq!(got, exact.round(), "{v}: exact {exact}");
+                }
             }
         }
         for (v, want) in [(-1.0, 0), (f32::NAN, 0), (f32::NEG_INFINITY, 0), (1.0, 255)] {
