@@ -45,20 +45,9 @@ impl Line {
     }
 }
 
-/// A register block's sums in memory, and whether the next kernel call adds to them (a
-/// later chunk of lights) or starts afresh.
-#[derive(Clone, Copy)]
-struct Acc {
-    sums: [[f32; STRIP]; MR],
-    add: bool,
-}
-
-impl Acc {
-    const ZERO: Acc = Acc {
-        sums: [[0.0; STRIP]; MR],
-        add: false,
-    };
-}
+/// A register block's sums in memory: carried from one chunk of lights to the next, and
+/// what the candidates are emitted from.
+type Acc = [[f32; STRIP]; MR];
 
 /// Linear gain of an exposure in stops.
 pub fn exposure_gain(stops: f32) -> f32 {
@@ -117,18 +106,26 @@ impl Kernel {
     }
 
     /// Computes one register block: `acc[r][p] = sum over active l of w[l][r] * b[l][p]`,
-    /// added to what `acc` holds when `add` (the lights of an earlier chunk), else from zero.
+    /// added to what `acc` holds if `add` (the sums of an earlier chunk), else from zero.
     /// The kernel also asks for the cache lines of `ahead` (its share of the next strip's
     /// panel), so memory streams in under the arithmetic.
-    fn block(self, w: &[[f32; MR]], b: &[Row], active: &[u32], acc: &mut Acc, ahead: Ahead) {
+    fn block(
+        self,
+        w: &[[f32; MR]],
+        b: &[Row],
+        active: &[u32],
+        acc: &mut Acc,
+        add: bool,
+        ahead: Ahead,
+    ) {
         match self {
             #[cfg(target_arch = "x86_64")]
             // SAFETY: `composite_with` only runs kernels whose `supported()` is true.
-            Kernel::Avx512 => unsafe { x86::block_avx512(w, b, active, acc, ahead) },
+            Kernel::Avx512 => unsafe { x86::block_avx512(w, b, active, acc, add, ahead) },
             #[cfg(target_arch = "x86_64")]
             // SAFETY: as above: AVX2 and FMA were detected.
-            Kernel::Avx2 => unsafe { x86::block_avx2(w, b, active, acc, ahead) },
-            _ => block_portable(w, b, active, acc),
+            Kernel::Avx2 => unsafe { x86::block_avx2(w, b, active, acc, add, ahead) },
+            _ => block_portable(w, b, active, acc, add),
         }
     }
 }
@@ -177,8 +174,7 @@ fn for_each_light(
     }
 }
 
-fn block_portable(w: &[[f32; MR]], b: &[Row], active: &[u32], acc: &mut Acc) {
-    let (add, acc) = (acc.add, &mut acc.sums);
+fn block_portable(w: &[[f32; MR]], b: &[Row], active: &[u32], acc: &mut Acc, add: bool) {
     if !add {
         for a in acc.iter_mut() {
             a.fill(0.0);
@@ -209,12 +205,13 @@ mod x86 {
         b: &[Row],
         active: &[u32],
         acc: &mut Acc,
+        add: bool,
         ahead: Ahead,
     ) {
         const V: usize = STRIP / 16;
         let mut c = [[_mm512_setzero_ps(); V]; MR];
-        if acc.add {
-            for (c, a) in c.iter_mut().zip(&acc.sums) {
+        if add {
+            for (c, a) in c.iter_mut().zip(acc.iter()) {
                 for (j, c) in c.iter_mut().enumerate() {
                     // SAFETY: `a` holds STRIP floats; lanes 16j..16j+16 are inside.
                     *c = unsafe { _mm512_loadu_ps(a.as_ptr().add(16 * j)) };
@@ -235,7 +232,7 @@ mod x86 {
                 }
             }
         });
-        for (a, c) in acc.sums.iter_mut().zip(&c) {
+        for (a, c) in acc.iter_mut().zip(&c) {
             for (j, &c) in c.iter().enumerate() {
                 // SAFETY: `a` holds STRIP floats; lanes 16j..16j+16 are inside.
                 unsafe { _mm512_storeu_ps(a.as_mut_ptr().add(16 * j), c) };
@@ -250,6 +247,7 @@ mod x86 {
         b: &[Row],
         active: &[u32],
         acc: &mut Acc,
+        add: bool,
         ahead: Ahead,
     ) {
         const V: usize = 3;
@@ -258,8 +256,8 @@ mod x86 {
         for part in 0..PARTS {
             let off = part * 8 * V;
             let mut c = [[_mm256_setzero_ps(); V]; MR];
-            if acc.add {
-                for (c, a) in c.iter_mut().zip(&acc.sums) {
+            if add {
+                for (c, a) in c.iter_mut().zip(acc.iter()) {
                     for (j, c) in c.iter_mut().enumerate() {
                         // SAFETY: off + 8 * V <= STRIP floats of `a`.
                         *c = unsafe { _mm256_loadu_ps(a.as_ptr().add(off + 8 * j)) };
@@ -280,7 +278,7 @@ mod x86 {
                     }
                 }
             });
-            for (a, c) in acc.sums.iter_mut().zip(&c) {
+            for (a, c) in acc.iter_mut().zip(&c) {
                 let a = &mut a[off..off + 8 * V];
                 for (j, &c) in c.iter().enumerate() {
                     // SAFETY: `a` holds 8 * V floats; lanes 8j..8j+8 are inside.
@@ -575,7 +573,7 @@ fn composite_chunked<O: Send>(
     let calls = blocks * 3 * chunks.len();
     tasks.into_par_iter().enumerate().for_each(|(t, mut outs)| {
         SCRATCH.with_borrow_mut(|(panel, accs)| {
-            accs.resize(3 * blocks, Acc::ZERO);
+            accs.resize(3 * blocks, [[0.0; STRIP]; MR]);
             for s in 0..task_strips {
                 let start = t * task_px + s * STRIP;
                 if start >= pixels {
@@ -611,10 +609,8 @@ fn composite_chunked<O: Send>(
                                 lines: per_call.min(lines.saturating_sub(call * per_call)),
                             };
                             call += 1;
-                            let acc = &mut accs[blk * 3 + ch];
-                            acc.add = k > 0;
-                            let w = &packed[i][range.clone()];
-                            kernel.block(w, b, &active[i][k], acc, ahead);
+                            let (w, acc) = (&packed[i][range.clone()], &mut accs[blk * 3 + ch]);
+                            kernel.block(w, b, &active[i][k], acc, k > 0, ahead);
                             // The block's sums are final after its last call (blue, last
                             // chunk): emitting its candidates now lets their encoding overlap
                             // the next block's multiply-adds in the out-of-order window.
@@ -622,7 +618,7 @@ fn composite_chunked<O: Send>(
                                 let cs = blk * MR..(blk * MR + MR).min(cands);
                                 for (c, out) in cs.clone().zip(&mut outs[cs]) {
                                     let rgb = std::array::from_fn(|ch| {
-                                        &accs[blk * 3 + ch].sums[c % MR][..len]
+                                        &accs[blk * 3 + ch][c % MR][..len]
                                     });
                                     emit(rgb, &mut out[local.clone()]);
                                 }
