@@ -617,8 +617,8 @@ fn composite_chunked<O: Send>(
                             let (w, acc) = (&packed[i][range.clone()], &mut accs[blk * 3 + ch]);
                             kernel.block(w, b, &active[i][k], acc, k > 0, ahead);
                             // The block's sums are final after its last call (blue, last
-                            // chunk): emitting its candidates now lets their encoding overlap
-                            // the next block's multiply-adds in the out-of-order window.
+                            // chunk): its candidates are emitted now, while the blue sums are
+                            // still in L1.
                             if ch == 2 && k + 1 == chunks.len() {
                                 let cs = blk * MR..(blk * MR + MR).min(cands);
                                 for (c, out) in cs.clone().zip(&mut outs[cs]) {
