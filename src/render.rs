@@ -574,6 +574,7 @@ fn composite_chunked<O: Send>(
     tasks.into_par_iter().enumerate().for_each(|(t, mut outs)| {
         SCRATCH.with_borrow_mut(|(panel, accs)| {
             accs.resize(3 * blocks, [[0.0; STRIP]; MR]);
+            panel.resize(size, Line([0.0; STRIP]));
             for s in 0..task_strips {
                 let start = t * task_px + s * STRIP;
                 if start >= pixels {
@@ -601,7 +602,6 @@ fn composite_chunked<O: Send>(
                         let b: &[Row] = match src {
                             Panel::Single(p) => &p.as_chunks().0[rows],
                             Panel::Half(p) => {
-                                panel.resize(size, Line([0.0; STRIP]));
                                 let dst = &mut Line::rows_mut(panel)[..range.len()];
                                 widen(kernel, &p[rows.start * STRIP..rows.end * STRIP], dst);
                                 dst
