@@ -187,7 +187,8 @@ pub fn srgb8_to_linear_table() -> &'static [f32; 256] {
 const KEY_BASE: u32 = 0x3780_0000;
 
 /// The encoder's table: per half octave s (the key's top 5 bits), a quadratic in the
-/// position t = (key << 5) mod 2^16 (in 1/65536ths), with the code x 256 + 128 as value:
+/// position t = the key rotated left by 5 within 16 bits (in 1/65536ths: the key's low 11
+/// bits, then s, which the fit allows for), with the code x 256 + 128 as value:
 /// `y = c0 + t * (c1 - t * n2)` in 16-bit fixed point, whose high byte is the code.
 /// Rows are `[c0, c1, n2]` (sRGB is concave, so the quadratic term is subtracted and every
 /// intermediate stays within 0..65536). 16-bit lanes do twice the work of 32-bit ones per
@@ -212,7 +213,8 @@ fn encode_table() -> &'static EncodeTable {
             let hi = f64::from(f32::from_bits(KEY_BASE + ((s + 1) << 22)));
             // Code x 256 + 128 at position t, aimed half a key into the key's range.
             let y = |t: f64| {
-                256.0 * 255.0 * linear_to_srgb_f64(lo + (t + 0.5 / 2048.0) * (hi - lo)) + 128.0
+                let x = t - f64::from(s) / 65536.0 + 0.5 / 2048.0;
+                256.0 * 255.0 * linear_to_srgb_f64(lo + x * (hi - lo)) + 128.0
             };
             let nodes: [f64; 3] = std::array::from_fn(|k| {
                 0.5 + 0.5 * ((2 * k + 1) as f64 * std::f64::consts::PI / 6.0).cos()
@@ -244,7 +246,7 @@ fn code_of_key(key: u32, table: &EncodeTable) -> u8 {
 /// check that neither leaves the 16 bits the SIMD lanes have.
 fn fixed_point(key: u32, table: &EncodeTable) -> [u32; 2] {
     let [c0, c1, n2] = table.dwords.map(|row| row[(key >> 11) as usize]);
-    let t = (key << 5) & 0xFFFF;
+    let t = ((key << 5) | (key >> 11)) & 0xFFFF;
     let y1 = c1.wrapping_sub((t * n2) >> 16);
     [y1, c0.wrapping_add((t * y1) >> 16)]
 }
@@ -292,8 +294,8 @@ pub fn encode_srgb8(v: f32) -> u8 {
 }
 
 /// [`encode_srgb8`] of planar `[R, G, B]` samples into interleaved `out` (`3 * n` long),
-/// the same codes bit for bit, 32, 16 or 8 pixels at a time with AVX-512 (VBMI), AVX-512 or
-/// AVX2.
+/// the same codes bit for bit, 32, 16 or 8 pixels at a time with AVX-512 (VBMI and VBMI2),
+/// AVX-512 or AVX2.
 pub fn encode_srgb8_planar(rgb: [&[f32]; 3], out: &mut [u8]) {
     let n = out.len() / 3;
     let rgb = rgb.map(|p| &p[..n]);
@@ -308,6 +310,9 @@ pub fn encode_srgb8_planar(rgb: [&[f32]; 3], out: &mut [u8]) {
         }
     }
 }
+
+#[cfg(target_arch = "x86_64")]
+pub(crate) use x86::Vbmi;
 
 /// The SIMD encoders: each does whole vectors of pixels and returns how many it did.
 #[cfg(target_arch = "x86_64")]
@@ -350,39 +355,190 @@ mod x86 {
         idx
     }
 
+    /// The encoder with AVX-512 VBMI, and proof that the CPU has AVX-512 F, BW, VBMI and
+    /// VBMI2: one is only made where it does. It holds the table in registers. Its methods
+    /// are always inlined (which functions with target features cannot be), so they compile
+    /// into callers that enable those features, the render's kernel among them.
+    #[derive(Clone, Copy)]
+    pub(crate) struct Vbmi {
+        rows: [__m512i; 3],
+        base: __m512i,
+        /// Byte k of two [`Vbmi::words`] (k < 32 from the first): where value k's code is.
+        bytes: __m512i,
+    }
+
+    impl Vbmi {
+        /// Loads the table; `None` if the CPU lacks one of the features.
+        pub(crate) fn new() -> Option<Vbmi> {
+            let have = is_x86_feature_detected!("avx512f")
+                && is_x86_feature_detected!("avx512bw")
+                && is_x86_feature_detected!("avx512vbmi")
+                && is_x86_feature_detected!("avx512vbmi2");
+            // SAFETY: the features were just detected.
+            have.then(|| unsafe { Vbmi::load() })
+        }
+
+        #[target_feature(enable = "avx512f,avx512bw,avx512vbmi,avx512vbmi2")]
+        fn load() -> Vbmi {
+            /// `vpackusdw` packs per 128-bit lane: word j of `words` holds value
+            /// 4 (j / 8) + j % 8 for j % 8 < 4, else that + 12; a code is a word's high byte.
+            const fn code_bytes() -> [u8; 64] {
+                let mut idx = [0u8; 64];
+                let mut k = 0;
+                while k < 64 {
+                    let v = k % 32;
+                    let j = if v < 16 {
+                        8 * (v / 4) + v % 4
+                    } else {
+                        8 * ((v - 16) / 4) + 4 + v % 4
+                    };
+                    idx[k] = (2 * j + 1 + 64 * (k / 32)) as u8;
+                    k += 1;
+                }
+                idx
+            }
+            const BYTES: [u8; 64] = code_bytes();
+            // SAFETY: each table row is 32 words (64 bytes), the index 64 bytes.
+            unsafe {
+                Vbmi {
+                    rows: encode_table()
+                        .words
+                        .map(|row| _mm512_loadu_si512(row.as_ptr().cast())),
+                    base: _mm512_set1_epi32((KEY_BASE >> 11) as i32),
+                    bytes: _mm512_loadu_si512(BYTES.as_ptr().cast()),
+                }
+            }
+        }
+
+        /// The codes of 32 values (`a` then `b`, as float bits), each the high byte of a
+        /// word, in `vpackusdw`'s order (see `load`).
+        #[inline(always)]
+        fn words(self, a: __m512i, b: __m512i) -> __m512i {
+            // SAFETY: a Vbmi exists only where the CPU has the features.
+            unsafe {
+                let a = _mm512_sub_epi32(_mm512_srai_epi32::<11>(a), self.base);
+                let b = _mm512_sub_epi32(_mm512_srai_epi32::<11>(b), self.base);
+                let key = _mm512_packus_epi32(a, b);
+                // The key rotated left by 5 is t with s in its low 5 bits, which are all
+                // a 32-word permute reads of its index.
+                let t = _mm512_shrdi_epi16::<11>(key, key);
+                let [c0, c1, n2] = self.rows.map(|row| _mm512_permutexvar_epi16(t, row));
+                let y1 = _mm512_sub_epi16(c1, _mm512_mulhi_epu16(t, n2));
+                _mm512_add_epi16(c0, _mm512_mulhi_epu16(t, y1))
+            }
+        }
+
+        /// [`Vbmi::words`] of `plane[i..i + 32]`.
+        ///
+        /// # Safety
+        /// `i + 32 <= plane.len()`.
+        #[inline(always)]
+        unsafe fn load_words(self, plane: &[f32], i: usize) -> __m512i {
+            debug_assert!(i + 32 <= plane.len());
+            // SAFETY: the caller guarantees the bounds; a Vbmi, the features.
+            unsafe {
+                let a = _mm512_loadu_si512(plane.as_ptr().add(i).cast());
+                let b = _mm512_loadu_si512(plane.as_ptr().add(i + 16).cast());
+                self.words(a, b)
+            }
+        }
+
+        /// The codes of 96 linear values, in order.
+        #[inline(always)]
+        pub(crate) fn plane(self, values: &[__m512; 6], plane: &mut [u8; 96]) {
+            // SAFETY: a Vbmi exists only where the CPU has the features; the stores are
+            // bytes 0..64 and 64..96 of the plane.
+            unsafe {
+                let v = values.map(|v| _mm512_castps_si512(v));
+                let [a, b, c] = [
+                    self.words(v[0], v[1]),
+                    self.words(v[2], v[3]),
+                    self.words(v[4], v[5]),
+                ];
+                let ab = _mm512_permutex2var_epi8(a, self.bytes, b);
+                let c = _mm512_castsi512_si256(_mm512_permutex2var_epi8(c, self.bytes, c));
+                _mm512_storeu_si512(plane.as_mut_ptr().cast(), ab);
+                _mm256_storeu_si256(plane.as_mut_ptr().add(64).cast(), c);
+            }
+        }
+
+        /// Interleaves planes of 96 red, green and blue codes into RGB pixels: the first
+        /// `min(out.len(), 288)` bytes of `out`. Per 64 bytes out, a two-table byte permute
+        /// for red and green and a masked one for blue.
+        #[inline(always)]
+        pub(crate) fn interleave(self, planes: [&[u8; 96]; 3], out: &mut [u8]) {
+            /// Output byte 64j + m is pixel p = (64j + m) / 3's channel (64j + m) % 3: the
+            /// red and green picks (p, 64 + p), the blue picks p and the blue mask.
+            const fn index(j: usize) -> ([u8; 64], [u8; 64], u64) {
+                let (mut rg, mut b, mut mask) = ([0u8; 64], [0u8; 64], 0u64);
+                let mut m = 0;
+                while m < 64 {
+                    let (p, c) = ((64 * j + m) / 3, (64 * j + m) % 3);
+                    match c {
+                        0 => rg[m] = p as u8,
+                        1 => rg[m] = 64 + p as u8,
+                        _ => {
+                            b[m] = p as u8;
+                            mask |= 1 << m;
+                        }
+                    }
+                    m += 1;
+                }
+                (rg, b, mask)
+            }
+            const INDEX: [([u8; 64], [u8; 64], u64); 3] = [index(0), index(1), index(2)];
+            let n = out.len().min(288);
+            // Pixels 0..64 make output bytes 0..192, pixels 64..96 bytes 192..288.
+            for (px, bytes) in [(0, 192), (64, 96usize)] {
+                let load: u64 = if px == 0 { !0 } else { 0xFFFF_FFFF };
+                // SAFETY: a Vbmi exists only where the CPU has the features; the loads are
+                // bytes px..px + 64 of a 96-byte plane, or at 64 its last 32.
+                let [r, g, b] = [0, 1, 2].map(|c| unsafe {
+                    _mm512_maskz_loadu_epi8(load, planes[c].as_ptr().add(px).cast())
+                });
+                for (j, (rg, bi, bm)) in INDEX.iter().enumerate().take(bytes.div_ceil(64)) {
+                    let at = 3 * px + 64 * j;
+                    if at >= n {
+                        return;
+                    }
+                    let keep = (n - at).min(64).min(bytes - 64 * j);
+                    let mask = if keep == 64 { !0 } else { (1u64 << keep) - 1 };
+                    // SAFETY: as above; the indices are 64 bytes each, and the bytes
+                    // stored are out[at..at + keep], inside out.
+                    unsafe {
+                        let [rg, bi] = [rg, bi].map(|i| _mm512_loadu_si512(i.as_ptr().cast()));
+                        let v = _mm512_permutex2var_epi8(r, rg, g);
+                        let v = _mm512_mask_permutexvar_epi8(v, *bm, bi, b);
+                        _mm512_mask_storeu_epi8(out.as_mut_ptr().add(at).cast(), mask, v);
+                    }
+                }
+            }
+        }
+    }
+
     /// With VBMI: 32 pixels at a time in 16-bit lanes, two byte permutes per 64 bytes out.
-    #[target_feature(enable = "avx512f,avx512bw,avx512vbmi")]
+    #[target_feature(enable = "avx512f,avx512bw,avx512vbmi,avx512vbmi2")]
     fn encode_avx512_vbmi(rgb: [&[f32]; 3], out: &mut [u8]) -> usize {
         const INDEX: [[[u8; 64]; 2]; 2] = [
             [interleave_words(false, 0), interleave_words(true, 0)],
             [interleave_words(false, 1), interleave_words(true, 1)],
         ];
         let n = rgb.iter().fold(out.len() / 3, |n, p| n.min(p.len())) / 32 * 32;
-        // SAFETY: each table row is 32 words (64 bytes), each index 64 bytes.
-        let [c0, c1, n2] = encode_table()
-            .words
-            .map(|row| unsafe { _mm512_loadu_si512(row.as_ptr().cast()) });
-        let index = INDEX.map(|h| h.map(|i| unsafe { _mm512_loadu_si512(i.as_ptr().cast()) }));
-        let base = _mm512_set1_epi32((KEY_BASE >> 11) as i32);
-        let codes = |plane: &[f32], i: usize| {
-            assert!(i + 32 <= plane.len());
-            // SAFETY: lanes i..i + 32 of `plane` are inside (asserted).
-            let [a, b] = [0, 16].map(|o| unsafe {
-                let bits = _mm512_loadu_si512(plane.as_ptr().add(i + o).cast());
-                _mm512_sub_epi32(_mm512_srai_epi32::<11>(bits), base)
-            });
-            let key = _mm512_packus_epi32(a, b);
-            let s = _mm512_srli_epi16::<11>(key);
-            let t = _mm512_slli_epi16::<5>(key);
-            let look = |row| _mm512_permutexvar_epi16(s, row);
-            let y1 = _mm512_sub_epi16(look(c1), _mm512_mulhi_epu16(t, look(n2)));
-            _mm512_add_epi16(look(c0), _mm512_mulhi_epu16(t, y1))
-        };
+        let vbmi = Vbmi::load();
+        // SAFETY: each index is 64 bytes.
+        let [[rg_lo, b_lo], [rg_hi, b_hi]] =
+            INDEX.map(|h| h.map(|i| unsafe { _mm512_loadu_si512(i.as_ptr().cast()) }));
         for i in (0..n).step_by(32) {
-            let [r, g, b] = rgb.map(|plane| codes(plane, i));
-            let [lo, hi] = index.map(|[rg, bl]| {
-                _mm512_permutex2var_epi8(_mm512_permutex2var_epi8(r, rg, g), bl, b)
-            });
+            // SAFETY: i + 32 <= n <= every plane's length; the features are this function's.
+            let [r, g, b] = unsafe {
+                [
+                    vbmi.load_words(rgb[0], i),
+                    vbmi.load_words(rgb[1], i),
+                    vbmi.load_words(rgb[2], i),
+                ]
+            };
+            let lo = _mm512_permutex2var_epi8(_mm512_permutex2var_epi8(r, rg_lo, g), b_lo, b);
+            let hi = _mm512_permutex2var_epi8(_mm512_permutex2var_epi8(r, rg_hi, g), b_hi, b);
             // SAFETY: the 96 bytes stored are out[3i..3i + 96], inside out.
             unsafe {
                 _mm512_storeu_si512(out.as_mut_ptr().add(3 * i).cast(), lo);
@@ -412,7 +568,12 @@ mod x86 {
             _mm512_set1_epi32(0xFFFF),
         );
         let s = _mm512_srli_epi32::<11>(key);
-        let t = _mm512_and_si512(_mm512_slli_epi32::<5>(key), _mm512_set1_epi32(0xFFFF));
+        // (key << 5 & 0xFFFF) | s, in one ternary-logic instruction (A & B | C is 0xEA).
+        let t = _mm512_ternarylogic_epi32::<0xEA>(
+            _mm512_slli_epi32::<5>(key),
+            _mm512_set1_epi32(0xFFFF),
+            s,
+        );
         let [c0, c1, n2] = table.map(|[lo, hi]| _mm512_permutex2var_epi32(lo, s, hi));
         let high = |a, b| _mm512_srli_epi32::<16>(_mm512_mullo_epi32(a, b));
         let y1 = _mm512_sub_epi32(c1, high(t, n2));
@@ -468,7 +629,10 @@ mod x86 {
                 _mm256_set1_epi32(0xFFFF),
             );
             let s = _mm256_srli_epi32::<11>(key);
-            let t = _mm256_and_si256(_mm256_slli_epi32::<5>(key), _mm256_set1_epi32(0xFFFF));
+            let t = _mm256_or_si256(
+                _mm256_and_si256(_mm256_slli_epi32::<5>(key), _mm256_set1_epi32(0xFFFF)),
+                s,
+            );
             // SAFETY: s is in 0..32, and each table row holds 32 dwords.
             let [c0, c1, n2] =
                 table.map(|row| unsafe { _mm256_i32gather_epi32::<4>(row.as_ptr().cast(), s) });
@@ -509,6 +673,7 @@ mod x86 {
                     is_x86_feature_detected!("avx512f"),
                     is_x86_feature_detected!("avx512bw"),
                     is_x86_feature_detected!("avx512vbmi"),
+                    is_x86_feature_detected!("avx512vbmi2"),
                 ]),
                 32,
                 encode_avx512_vbmi,

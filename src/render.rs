@@ -7,7 +7,9 @@
 //! micro-kernel (4 candidates x 96 pixels) over chunks of lights small enough to stay in L1,
 //! for every block of candidates before the next chunk: the basis is read from memory once
 //! per batch, each chunk from L1 once per block, and the FMA units stay busy. The kernel is
-//! picked at run time ([`Kernel::detect`]): AVX-512, AVX2+FMA, or portable code.
+//! picked at run time ([`Kernel::detect`]): AVX-512, AVX2+FMA, or portable code. Thumbnails
+//! ([`composite_srgb8`]) are encoded to sRGB inside the AVX-512 kernel where the CPU has
+//! VBMI, as each channel's sums become final.
 
 use half::f16;
 use half::slice::HalfFloatSliceExt;
@@ -48,6 +50,9 @@ impl Line {
 /// A register block's sums in memory: carried from one chunk of lights to the next, and
 /// what the candidates are emitted from.
 type Acc = [[f32; STRIP]; MR];
+
+/// A register block's sRGB codes of one channel: a plane of STRIP bytes per candidate.
+type Codes = [[u8; STRIP]; MR];
 
 /// Linear gain of an exposure in stops.
 pub fn exposure_gain(stops: f32) -> f32 {
@@ -105,29 +110,34 @@ impl Kernel {
         }
     }
 
-    /// Computes one register block: `acc[r][p] = sum over active l of w[l][r] * b[l][p]`,
-    /// added to what `acc` holds if `add` (the sums of an earlier chunk), else from zero.
-    /// The kernel also asks for the cache lines of `ahead` (its share of the next strip's
-    /// panel), so memory streams in under the arithmetic.
-    fn block(
-        self,
-        w: &[[f32; MR]],
-        b: &[Row],
-        active: &[u32],
-        acc: &mut Acc,
-        add: bool,
-        ahead: Ahead,
-    ) {
+    /// Computes one register block's sums into `acc` (see [`Call`]).
+    fn block(self, call: Call, acc: &mut Acc) {
         match self {
             #[cfg(target_arch = "x86_64")]
             // SAFETY: `composite_with` only runs kernels whose `supported()` is true.
-            Kernel::Avx512 => unsafe { x86::block_avx512(w, b, active, acc, add, ahead) },
+            Kernel::Avx512 => unsafe { x86::block_avx512(call, acc) },
             #[cfg(target_arch = "x86_64")]
             // SAFETY: as above: AVX2 and FMA were detected.
-            Kernel::Avx2 => unsafe { x86::block_avx2(w, b, active, acc, add, ahead) },
-            _ => block_portable(w, b, active, acc, add),
+            Kernel::Avx2 => unsafe { x86::block_avx2(call, acc) },
+            _ => block_portable(call, acc),
         }
     }
+}
+
+/// One kernel call: `acc[r][p] = sum over active l of w[l][r] * b[l][p]`, added to the
+/// stored sums if `add` (an earlier chunk's), else from zero. The kernel also asks for the
+/// cache lines of `ahead` (its share of the next strip's panel), so memory streams in under
+/// the arithmetic.
+#[derive(Clone, Copy)]
+struct Call<'a> {
+    /// The block's weights over the chunk's lights, `[light][candidate]`.
+    w: &'a [[f32; MR]],
+    /// The chunk's rows of the strip's panel.
+    b: &'a [Row],
+    /// The lights of the chunk that contribute to the block (weights not all zero).
+    active: &'a [u32],
+    add: bool,
+    ahead: Ahead,
 }
 
 /// Cache lines to prefetch: `lines` lines from `start`. A prefetch is only a hint and never
@@ -152,35 +162,33 @@ impl Ahead {
     }
 }
 
-/// Calls `light` with the row and weights of every contributing light. When they all
-/// contribute it walks the rows in order: with no index to load and check, the loop's few
-/// scalar instructions leave the FMA ports to the FMAs (5-15% faster than the indexed loop
-/// in same-run measurements).
-#[inline(always)]
-fn for_each_light(
-    w: &[[f32; MR]],
-    b: &[Row],
-    active: &[u32],
-    mut light: impl FnMut(&Row, &[f32; MR]),
-) {
-    if active.len() == b.len() {
-        for (row, ws) in b.iter().zip(w) {
-            light(row, ws);
-        }
-    } else {
-        for &l in active {
-            light(&b[l as usize], &w[l as usize]);
+impl Call<'_> {
+    /// Calls `light` with the row and weights of every contributing light. When they all
+    /// contribute it walks the rows in order: with no index to load and check, the loop's
+    /// few scalar instructions leave the FMA ports to the FMAs (5-15% faster than the
+    /// indexed loop in same-run measurements).
+    #[inline(always)]
+    fn for_each_light(self, mut light: impl FnMut(&Row, &[f32; MR])) {
+        let Call { w, b, active, .. } = self;
+        if active.len() == b.len() {
+            for (row, ws) in b.iter().zip(w) {
+                light(row, ws);
+            }
+        } else {
+            for &l in active {
+                light(&b[l as usize], &w[l as usize]);
+            }
         }
     }
 }
 
-fn block_portable(w: &[[f32; MR]], b: &[Row], active: &[u32], acc: &mut Acc, add: bool) {
-    if !add {
+fn block_portable(call: Call, acc: &mut Acc) {
+    if !call.add {
         for a in acc.iter_mut() {
             a.fill(0.0);
         }
     }
-    for_each_light(w, b, active, |row, ws| {
+    call.for_each_light(|row, ws| {
         for (a, &k) in acc.iter_mut().zip(ws) {
             for (a, &v) in a.iter_mut().zip(row) {
                 *a += k * v;
@@ -195,43 +203,55 @@ mod x86 {
 
     use half::f16;
 
-    use super::{Acc, Ahead, MR, Row, STRIP, for_each_light};
+    use super::{Acc, Call, Codes, MR, STRIP};
+    use crate::color::Vbmi;
+
+    /// Zmm vectors per row.
+    const V: usize = STRIP / 16;
 
     /// 4 candidates x 96 pixels in 24 zmm accumulators; per light 6 loads, 4 broadcasts,
-    /// 24 FMAs.
-    #[target_feature(enable = "avx512f")]
-    pub(super) fn block_avx512(
-        w: &[[f32; MR]],
-        b: &[Row],
-        active: &[u32],
-        acc: &mut Acc,
-        add: bool,
-        ahead: Ahead,
-    ) {
-        const V: usize = STRIP / 16;
-        let mut c = [[_mm512_setzero_ps(); V]; MR];
-        if add {
-            for (c, a) in c.iter_mut().zip(acc.iter()) {
-                for (j, c) in c.iter_mut().enumerate() {
-                    // SAFETY: `a` holds STRIP floats; lanes 16j..16j+16 are inside.
-                    *c = unsafe { _mm512_loadu_ps(a.as_ptr().add(16 * j)) };
+    /// 24 FMAs. The sums are left in registers for the caller to store or encode (always
+    /// inlined, which a function with target features cannot be: 24 registers returned
+    /// through memory would undo the point).
+    ///
+    /// # Safety
+    /// The CPU must have AVX-512F.
+    #[inline(always)]
+    unsafe fn sums_avx512(call: Call, acc: &Acc) -> [[__m512; V]; MR] {
+        // SAFETY: the caller guarantees AVX-512F; the loads are in bounds (noted at each).
+        unsafe {
+            let mut c = [[_mm512_setzero_ps(); V]; MR];
+            if call.add {
+                for (c, a) in c.iter_mut().zip(acc.iter()) {
+                    for (j, c) in c.iter_mut().enumerate() {
+                        // `a` holds STRIP floats; lanes 16j..16j+16 are inside.
+                        *c = _mm512_loadu_ps(a.as_ptr().add(16 * j));
+                    }
                 }
             }
+            call.ahead.touch_all();
+            call.for_each_light(|row, ws| {
+                let mut v = [_mm512_setzero_ps(); V];
+                for (j, v) in v.iter_mut().enumerate() {
+                    // `row` holds STRIP = 16 * V floats; lanes 16j..16j+16 are inside.
+                    *v = _mm512_loadu_ps(row.as_ptr().add(16 * j));
+                }
+                for (c, &k) in c.iter_mut().zip(ws) {
+                    let k = _mm512_set1_ps(k);
+                    for (c, &v) in c.iter_mut().zip(&v) {
+                        *c = _mm512_fmadd_ps(k, v, *c);
+                    }
+                }
+            });
+            c
         }
-        ahead.touch_all();
-        for_each_light(w, b, active, |row, ws| {
-            let mut v = [_mm512_setzero_ps(); V];
-            for (j, v) in v.iter_mut().enumerate() {
-                // SAFETY: `row` holds STRIP = 16 * V floats; lanes 16j..16j+16 are inside.
-                *v = unsafe { _mm512_loadu_ps(row.as_ptr().add(16 * j)) };
-            }
-            for (c, &k) in c.iter_mut().zip(ws) {
-                let k = _mm512_set1_ps(k);
-                for (c, &v) in c.iter_mut().zip(&v) {
-                    *c = _mm512_fmadd_ps(k, v, *c);
-                }
-            }
-        });
+    }
+
+    /// The register block with its sums stored to `acc`.
+    #[target_feature(enable = "avx512f")]
+    pub(super) fn block_avx512(call: Call, acc: &mut Acc) {
+        // SAFETY: this function's features include AVX-512F.
+        let c = unsafe { sums_avx512(call, acc) };
         for (a, c) in acc.iter_mut().zip(&c) {
             for (j, &c) in c.iter().enumerate() {
                 // SAFETY: `a` holds STRIP floats; lanes 16j..16j+16 are inside.
@@ -240,23 +260,45 @@ mod x86 {
         }
     }
 
+    /// The register block with its sums encoded to sRGB codes straight from the registers,
+    /// one plane of STRIP bytes per candidate: the sums never go to memory, and the planes
+    /// (a quarter of their bytes) stay in L1 until the block's blue is done.
+    #[target_feature(enable = "avx512f,avx512bw,avx512vbmi,avx512vbmi2")]
+    pub(super) fn codes_avx512(call: Call, acc: &Acc, vbmi: Vbmi, codes: &mut Codes) {
+        // SAFETY: this function's features include AVX-512F.
+        let c = unsafe { sums_avx512(call, acc) };
+        for (plane, c) in codes.iter_mut().zip(&c) {
+            vbmi.plane(c, plane);
+        }
+    }
+
+    /// Interleaves each candidate's red, green and blue code planes into its output's
+    /// `local` bytes.
+    #[target_feature(enable = "avx512f,avx512bw,avx512vbmi,avx512vbmi2")]
+    pub(super) fn emit_codes(
+        vbmi: Vbmi,
+        codes: &[Codes; 3],
+        outs: &mut [&mut [u8]],
+        local: std::ops::Range<usize>,
+    ) {
+        for (r, out) in outs.iter_mut().enumerate() {
+            vbmi.interleave(
+                [&codes[0][r], &codes[1][r], &codes[2][r]],
+                &mut out[local.clone()],
+            );
+        }
+    }
+
     /// Four passes of 4 candidates x 24 pixels (12 ymm accumulators of 16 registers).
     #[target_feature(enable = "avx2,fma")]
-    pub(super) fn block_avx2(
-        w: &[[f32; MR]],
-        b: &[Row],
-        active: &[u32],
-        acc: &mut Acc,
-        add: bool,
-        ahead: Ahead,
-    ) {
+    pub(super) fn block_avx2(call: Call, acc: &mut Acc) {
         const V: usize = 3;
         const PARTS: usize = STRIP / (8 * V);
-        ahead.touch_all();
+        call.ahead.touch_all();
         for part in 0..PARTS {
             let off = part * 8 * V;
             let mut c = [[_mm256_setzero_ps(); V]; MR];
-            if add {
+            if call.add {
                 for (c, a) in c.iter_mut().zip(acc.iter()) {
                     for (j, c) in c.iter_mut().enumerate() {
                         // SAFETY: off + 8 * V <= STRIP floats of `a`.
@@ -264,7 +306,7 @@ mod x86 {
                     }
                 }
             }
-            for_each_light(w, b, active, |row, ws| {
+            call.for_each_light(|row, ws| {
                 let row = &row[off..off + 8 * V];
                 let mut v = [_mm256_setzero_ps(); V];
                 for (j, v) in v.iter_mut().enumerate() {
@@ -501,6 +543,44 @@ pub fn composite_with<O: Send>(
     composite_chunked(kernel, basis, weights, outputs, CHUNK_LIGHTS, emit);
 }
 
+/// Renders 8-bit sRGB (interleaved), the same bytes as [`composite_with`] and
+/// [`encode_srgb8_planar`]. With AVX-512 VBMI the kernel encodes each channel's sums as
+/// soon as they are final, straight from its registers, and a block's candidates are
+/// interleaved from those code planes: the sums never go through memory.
+pub fn composite_srgb8(
+    kernel: Kernel,
+    basis: &BasisImages,
+    weights: &[Vec<[f32; 3]>],
+    outputs: &mut [Vec<u8>],
+) {
+    composite_srgb8_chunked(kernel, basis, weights, outputs, CHUNK_LIGHTS);
+}
+
+/// [`composite_srgb8`] with the lights cut into chunks of `chunk` (tests use small ones).
+fn composite_srgb8_chunked(
+    kernel: Kernel,
+    basis: &BasisImages,
+    weights: &[Vec<[f32; 3]>],
+    outputs: &mut [Vec<u8>],
+    chunk: usize,
+) {
+    #[cfg(target_arch = "x86_64")]
+    if kernel == Kernel::Avx512
+        && let Some(vbmi) = crate::color::Vbmi::new()
+    {
+        return run(kernel, basis, weights, outputs, chunk, |last| {
+            let ch = last.ch;
+            // SAFETY: Vbmi::new() checked AVX-512 F, BW, VBMI and VBMI2.
+            unsafe { x86::codes_avx512(last.call, &last.sums[ch], vbmi, &mut last.codes[ch]) };
+            if ch == 2 {
+                // SAFETY: as above.
+                unsafe { x86::emit_codes(vbmi, last.codes, last.outs, last.local) };
+            }
+        });
+    }
+    composite_chunked(kernel, basis, weights, outputs, chunk, encode_srgb8_planar);
+}
+
 /// Lights per chunk of a strip's panel: 64 x 96 floats (24 KB) stay in L1 while every
 /// register block runs over them; the sums of a larger rig are carried from chunk to chunk
 /// in memory (GEMM's K-blocking; the sums, 4.5 KB a block of 4 candidates, sit in L2).
@@ -514,6 +594,46 @@ fn composite_chunked<O: Send>(
     outputs: &mut [Vec<O>],
     chunk: usize,
     emit: impl Fn([&[f32]; 3], &mut [O]) + Sync,
+) {
+    run(kernel, basis, weights, outputs, chunk, |last| {
+        let ch = last.ch;
+        let acc = &mut last.sums[ch];
+        kernel.block(last.call, acc);
+        // The block's sums are final after its blue: its candidates are emitted now,
+        // while the blue sums are still in L1.
+        if ch == 2 {
+            let len = last.local.len() / 3;
+            for (r, out) in last.outs.iter_mut().enumerate() {
+                let rgb = std::array::from_fn(|ch| &last.sums[ch][r][..len]);
+                emit(rgb, &mut out[last.local.clone()]);
+            }
+        }
+    });
+}
+
+/// A register block's last kernel call for one channel (its sums are final after it),
+/// which the render's `finish` makes and turns into output.
+struct Last<'a, 'o, O> {
+    call: Call<'a>,
+    ch: usize,
+    /// The block's sums and (for renders that encode them in registers) code planes, per
+    /// channel.
+    sums: &'a mut [Acc; 3],
+    codes: &'a mut [Codes; 3],
+    /// The block's candidates' outputs, of which this strip is `local`.
+    outs: &'a mut [&'o mut [O]],
+    local: std::ops::Range<usize>,
+}
+
+/// The batched compositor's loop: every call but a block's last of a channel stores its
+/// sums; the last is `finish`'s.
+fn run<O: Send>(
+    kernel: Kernel,
+    basis: &BasisImages,
+    weights: &[Vec<[f32; 3]>],
+    outputs: &mut [Vec<O>],
+    chunk: usize,
+    finish: impl Fn(Last<'_, '_, O>) + Sync,
 ) {
     assert!(kernel.supported(), "{kernel:?} does not run on this CPU");
     let (pixels, lights) = (basis.pixels(), basis.lights);
@@ -572,8 +692,9 @@ fn composite_chunked<O: Send>(
     // Kernel calls per strip, over which the next strip's prefetch is shared out.
     let calls = blocks * 3 * chunks.len();
     tasks.into_par_iter().enumerate().for_each(|(t, mut outs)| {
-        SCRATCH.with_borrow_mut(|(panel, accs)| {
-            accs.resize(3 * blocks, [[0.0; STRIP]; MR]);
+        SCRATCH.with_borrow_mut(|Scratch { panel, sums, codes }| {
+            sums.resize(blocks, [[[0.0; STRIP]; MR]; 3]);
+            codes.resize(blocks, [[[0; STRIP]; MR]; 3]);
             panel.resize(size, Line([0.0; STRIP]));
             for s in 0..task_strips {
                 let start = t * task_px + s * STRIP;
@@ -590,7 +711,7 @@ fn composite_chunked<O: Send>(
                 };
                 let lines = next.1.div_ceil(64);
                 let per_call = lines.div_ceil(calls);
-                let mut call = 0;
+                let mut issued = 0;
                 let local = s * STRIP * 3..(s * STRIP + len) * 3;
                 for ch in 0..3 {
                     for (k, range) in chunks.iter().enumerate() {
@@ -610,24 +731,30 @@ fn composite_chunked<O: Send>(
                         for blk in 0..blocks {
                             let i = ch * blocks + blk;
                             let ahead = Ahead {
-                                start: next.0.wrapping_add(call * per_call * 64),
-                                lines: per_call.min(lines.saturating_sub(call * per_call)),
+                                start: next.0.wrapping_add(issued * per_call * 64),
+                                lines: per_call.min(lines.saturating_sub(issued * per_call)),
                             };
-                            call += 1;
-                            let (w, acc) = (&packed[i][range.clone()], &mut accs[blk * 3 + ch]);
-                            kernel.block(w, b, &active[i][k], acc, k > 0, ahead);
-                            // The block's sums are final after its last call (blue, last
-                            // chunk): its candidates are emitted now, while the blue sums are
-                            // still in L1.
-                            if ch == 2 && k + 1 == chunks.len() {
-                                let cs = blk * MR..(blk * MR + MR).min(cands);
-                                for (c, out) in cs.clone().zip(&mut outs[cs]) {
-                                    let rgb = std::array::from_fn(|ch| {
-                                        &accs[blk * 3 + ch][c % MR][..len]
-                                    });
-                                    emit(rgb, &mut out[local.clone()]);
-                                }
+                            issued += 1;
+                            let call = Call {
+                                w: &packed[i][range.clone()],
+                                b,
+                                active: &active[i][k],
+                                add: k > 0,
+                                ahead,
+                            };
+                            if k + 1 < chunks.len() {
+                                kernel.block(call, &mut sums[blk][ch]);
+                                continue;
                             }
+                            let cs = blk * MR..(blk * MR + MR).min(cands);
+                            finish(Last {
+                                call,
+                                ch,
+                                sums: &mut sums[blk],
+                                codes: &mut codes[blk],
+                                outs: &mut outs[cs],
+                                local: local.clone(),
+                            });
                         }
                     }
                 }
@@ -642,12 +769,26 @@ fn composite_chunked<O: Send>(
     });
 }
 
+/// A thread's working memory, kept between renders (allocating and zeroing it per task
+/// showed in profiles).
+struct Scratch {
+    /// One chunk of a panel, widened from half floats.
+    panel: Vec<Line>,
+    /// Every register block's sums per channel.
+    sums: Vec<[Acc; 3]>,
+    /// Every register block's code planes per channel, for renders that encode in the
+    /// kernel.
+    codes: Vec<[Codes; 3]>,
+}
+
 thread_local! {
-    /// Each thread's half-to-single conversion buffer for one chunk of a panel and the sums of
-    /// every register block, kept between renders (allocating and zeroing them per
-    /// task showed in profiles).
-    static SCRATCH: std::cell::RefCell<(Vec<Line>, Vec<Acc>)> =
-        const { std::cell::RefCell::new((Vec::new(), Vec::new())) };
+    static SCRATCH: std::cell::RefCell<Scratch> = const {
+        std::cell::RefCell::new(Scratch {
+            panel: Vec::new(),
+            sums: Vec::new(),
+            codes: Vec::new(),
+        })
+    };
 }
 
 /// `n` zeroed output buffers of `len`, zeroed on all threads (the allocator usually hands
@@ -663,7 +804,7 @@ pub fn zeroed_outputs<O: Default + Clone + Send>(n: usize, len: usize) -> Vec<Ve
 pub fn render_srgb8(basis: &BasisImages, looks: &[&Look], gain: f32) -> Vec<image::RgbImage> {
     let w = weights(looks, gain);
     let mut outs = zeroed_outputs(looks.len(), basis.pixels() * 3);
-    composite_with(Kernel::detect(), basis, &w, &mut outs, encode_srgb8_planar);
+    composite_srgb8(Kernel::detect(), basis, &w, &mut outs);
     outs.into_iter()
         .map(|buf| {
             image::RgbImage::from_raw(basis.width as u32, basis.height as u32, buf)
@@ -765,6 +906,54 @@ mod tests {
             }
             check(kernel, Precision::Single);
             check(kernel, Precision::Half);
+        }
+    }
+
+    /// The sRGB render (fused with the kernel where the CPU has VBMI) gives the bytes of the
+    /// generic compositor with the planar encoder, on every kernel, with one chunk and
+    /// several, across the whole curve (gains from dark to overexposed).
+    #[test]
+    fn srgb8_render_matches_the_planar_encoder() {
+        let (w, h, lights, planes) = planes();
+        let looks = looks(lights);
+        let refs: Vec<&Look> = looks.iter().collect();
+        for precision in [Precision::Single, Precision::Half] {
+            let basis = BasisImages::from_planes(w, h, lights, &planes, precision);
+            for gain in [0.004, 0.05, 0.7] {
+                let wts = weights(&refs, gain);
+                for kernel in Kernel::ALL.into_iter().filter(|k| k.supported()) {
+                    for chunk in [CHUNK_LIGHTS, 3] {
+                        let mut want = zeroed_outputs(looks.len(), w * h * 3);
+                        composite_chunked(
+                            kernel,
+                            &basis,
+                            &wts,
+                            &mut want,
+                            chunk,
+                            encode_srgb8_planar,
+                        );
+                        let mut got = zeroed_outputs(looks.len(), w * h * 3);
+                        composite_srgb8_chunked(kernel, &basis, &wts, &mut got, chunk);
+                        for (k, (got, want)) in got.iter().zip(&want).enumerate() {
+                            if let Some(i) = (0..got.len()).find(|&i| got[i] != want[i]) {
+                                panic!(
+                                    "{kernel:?} {precision:?} gain {gain} chunk {chunk} look {k} byte {i}: {} vs {}",
+                                    got[i], want[i]
+                                );
+                            }
+                        }
+                        let distinct = want
+                            .iter()
+                            .flatten()
+                            .collect::<std::collections::BTreeSet<_>>();
+                        assert!(
+                            distinct.len() > 40,
+                            "gain {gain}: only {} codes",
+                            distinct.len()
+                        );
+                    }
+                }
+            }
         }
     }
 

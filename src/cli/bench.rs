@@ -8,11 +8,10 @@ use std::time::{Duration, Instant};
 use anyhow::Context;
 use rand::{RngExt, SeedableRng};
 
-use crate::color::encode_srgb8_planar;
 use crate::look::{Level, Look};
 use crate::objective::{Aspects, Objective, Region, analyze, decode_reference};
 use crate::output::{Output, OutputConfig, SacnDest};
-use crate::render::{Kernel, composite_clamped, composite_with, weights};
+use crate::render::{Kernel, composite_clamped, composite_srgb8, weights};
 use crate::sampler::{Constraints, Spread};
 use crate::stage::{GenerateRequest, Stage, THUMB_WIDTH};
 
@@ -369,7 +368,7 @@ fn compositor(stage: &Stage, kernel: Kernel, product: Product, reps: usize) -> R
     let mut render = || match product {
         Product::Thumbnails => {
             bytes.resize_with(looks.len(), || vec![0u8; len]);
-            composite_with(kernel, basis, &w, &mut bytes, encode_srgb8_planar);
+            composite_srgb8(kernel, basis, &w, &mut bytes);
         }
         Product::Linear => {
             floats.resize_with(looks.len(), || vec![0f32; len]);
