@@ -293,6 +293,27 @@ mod x86 {
         }
     }
 
+    /// Asks for the cache lines of each output's `local` bytes, to be written: the last
+    /// kernel call of a block runs while they arrive, rather than its stores waiting for
+    /// them (2% faster at 44 lights in same-run pairs). PREFETCHW is in inline assembly
+    /// (its target feature is not stable in Rust); every CPU with AVX-512 VBMI has it.
+    pub(super) fn prefetch_for_writing(outs: &[&mut [u8]], local: std::ops::Range<usize>) {
+        for out in outs {
+            let bytes = &out[local.clone()];
+            for at in (0..bytes.len())
+                .step_by(64)
+                .chain([bytes.len().saturating_sub(1)])
+            {
+                let line = bytes.as_ptr().wrapping_add(at);
+                // SAFETY: a prefetch is a hint: it reads and writes nothing and never
+                // faults; the address is inside `bytes` anyway.
+                unsafe {
+                    std::arch::asm!("prefetchw [{0}]", in(reg) line, options(nostack, preserves_flags, readonly));
+                }
+            }
+        }
+    }
+
     /// Four passes of 4 candidates x 24 pixels (12 ymm accumulators of 16 registers).
     #[target_feature(enable = "avx2,fma")]
     pub(super) fn block_avx2(call: Call, acc: &mut Acc) {
@@ -574,6 +595,9 @@ fn composite_srgb8_chunked(
     {
         return run(kernel, basis, weights, outputs, chunk, |last| {
             let ch = last.ch;
+            if ch == 2 {
+                x86::prefetch_for_writing(last.outs, last.local.clone());
+            }
             // SAFETY: Vbmi::new() checked AVX-512 F, BW, VBMI and VBMI2.
             unsafe { x86::codes_avx512(last.call, &last.sums[ch], vbmi, &mut last.codes[ch]) };
             if ch == 2 {
