@@ -647,6 +647,8 @@ struct Last<'a, 'o, O> {
     /// The block's sums and (for renders that encode them in registers) code planes, per
     /// channel.
     sums: &'a mut [Acc; 3],
+    // Only the x86-64 in-kernel encoding reads the planes.
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
     codes: &'a mut [Codes; 3],
     /// The block's candidates' outputs, of which this strip is `local`.
     outs: &'a mut [&'o mut [O]],
