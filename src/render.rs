@@ -281,7 +281,7 @@ mod x86 {
     #[target_feature(enable = "avx512f,avx512bw,avx512vbmi,avx512vbmi2")]
     pub(super) fn emit_codes(
         vbmi: Vbmi,
-        codes: &[Codes; 3],
+        codes: [&Codes; 3],
         outs: &mut [&mut [u8]],
         local: std::ops::Range<usize>,
     ) {
@@ -598,11 +598,16 @@ fn composite_srgb8_chunked(
             if ch == 2 {
                 x86::prefetch_for_writing(last.outs, last.local.clone());
             }
+            let plane = match ch {
+                2 => &mut *last.blue,
+                _ => &mut last.codes[ch],
+            };
             // SAFETY: Vbmi::new() checked AVX-512 F, BW, VBMI and VBMI2.
-            unsafe { x86::codes_avx512(last.call, &last.sums[ch], vbmi, &mut last.codes[ch]) };
+            unsafe { x86::codes_avx512(last.call, &last.sums[ch], vbmi, plane) };
             if ch == 2 {
+                let planes = [&last.codes[0], &last.codes[1], &*last.blue];
                 // SAFETY: as above.
-                unsafe { x86::emit_codes(vbmi, last.codes, last.outs, last.local) };
+                unsafe { x86::emit_codes(vbmi, planes, last.outs, last.local) };
             }
         });
     }
@@ -644,12 +649,15 @@ fn composite_chunked<O: Send>(
 struct Last<'a, 'o, O> {
     call: Call<'a>,
     ch: usize,
-    /// The block's sums and (for renders that encode them in registers) code planes, per
-    /// channel.
+    /// The block's sums per channel.
     sums: &'a mut [Acc; 3],
-    // Only the x86-64 in-kernel encoding reads the planes.
+    /// For renders that encode in the kernel: the block's red and green code planes, and
+    /// the blue one, which every block shares (it is interleaved as soon as it is made).
+    // Only the x86-64 in-kernel encoding reads them.
     #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
-    codes: &'a mut [Codes; 3],
+    codes: &'a mut [Codes; 2],
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
+    blue: &'a mut Codes,
     /// The block's candidates' outputs, of which this strip is `local`.
     outs: &'a mut [&'o mut [O]],
     local: std::ops::Range<usize>,
@@ -722,74 +730,82 @@ fn run<O: Send>(
     // Kernel calls per strip, over which the next strip's prefetch is shared out.
     let calls = blocks * 3 * chunks.len();
     tasks.into_par_iter().enumerate().for_each(|(t, mut outs)| {
-        SCRATCH.with_borrow_mut(|Scratch { panel, sums, codes }| {
-            sums.resize(blocks, [[[0.0; STRIP]; MR]; 3]);
-            codes.resize(blocks, [[[0; STRIP]; MR]; 3]);
-            panel.resize(size, Line([0.0; STRIP]));
-            for s in 0..task_strips {
-                let start = t * task_px + s * STRIP;
-                if start >= pixels {
-                    break;
-                }
-                let len = (pixels - start).min(STRIP);
-                let strip = start / STRIP;
-                let src = basis.panel(strip);
-                let next = match (strip + 1 < strips).then(|| basis.panel(strip + 1)) {
-                    Some(Panel::Single(p)) => (p.as_ptr().cast::<u8>(), size_of_val(p)),
-                    Some(Panel::Half(p)) => (p.as_ptr().cast::<u8>(), size_of_val(p)),
-                    None => (std::ptr::null(), 0),
-                };
-                let lines = next.1.div_ceil(64);
-                let per_call = lines.div_ceil(calls);
-                let mut issued = 0;
-                let local = s * STRIP * 3..(s * STRIP + len) * 3;
-                for ch in 0..3 {
-                    for (k, range) in chunks.iter().enumerate() {
-                        let rows = ch * lights + range.start..ch * lights + range.end;
-                        // A half-float chunk is widened just before the blocks that read it, so
-                        // its floats are written to and read from L1. Widening the whole
-                        // strip first (50 KB at 44 lights) sent them through L2: 3% slower
-                        // at 44 and 267 lights in same-run measurements.
-                        let b: &[Row] = match src {
-                            Panel::Single(p) => &p.as_chunks().0[rows],
-                            Panel::Half(p) => {
-                                let dst = &mut Line::rows_mut(panel)[..range.len()];
-                                widen(kernel, &p[rows.start * STRIP..rows.end * STRIP], dst);
-                                dst
-                            }
-                        };
-                        for blk in 0..blocks {
-                            let i = ch * blocks + blk;
-                            let ahead = Ahead {
-                                start: next.0.wrapping_add(issued * per_call * 64),
-                                lines: per_call.min(lines.saturating_sub(issued * per_call)),
+        SCRATCH.with_borrow_mut(
+            |Scratch {
+                 panel,
+                 sums,
+                 codes,
+                 blue,
+             }| {
+                sums.resize(blocks, [[[0.0; STRIP]; MR]; 3]);
+                codes.resize(blocks, [[[0; STRIP]; MR]; 2]);
+                panel.resize(size, Line([0.0; STRIP]));
+                for s in 0..task_strips {
+                    let start = t * task_px + s * STRIP;
+                    if start >= pixels {
+                        break;
+                    }
+                    let len = (pixels - start).min(STRIP);
+                    let strip = start / STRIP;
+                    let src = basis.panel(strip);
+                    let next = match (strip + 1 < strips).then(|| basis.panel(strip + 1)) {
+                        Some(Panel::Single(p)) => (p.as_ptr().cast::<u8>(), size_of_val(p)),
+                        Some(Panel::Half(p)) => (p.as_ptr().cast::<u8>(), size_of_val(p)),
+                        None => (std::ptr::null(), 0),
+                    };
+                    let lines = next.1.div_ceil(64);
+                    let per_call = lines.div_ceil(calls);
+                    let mut issued = 0;
+                    let local = s * STRIP * 3..(s * STRIP + len) * 3;
+                    for ch in 0..3 {
+                        for (k, range) in chunks.iter().enumerate() {
+                            let rows = ch * lights + range.start..ch * lights + range.end;
+                            // A half-float chunk is widened just before the blocks that read it, so
+                            // its floats are written to and read from L1. Widening the whole
+                            // strip first (50 KB at 44 lights) sent them through L2: 3% slower
+                            // at 44 and 267 lights in same-run measurements.
+                            let b: &[Row] = match src {
+                                Panel::Single(p) => &p.as_chunks().0[rows],
+                                Panel::Half(p) => {
+                                    let dst = &mut Line::rows_mut(panel)[..range.len()];
+                                    widen(kernel, &p[rows.start * STRIP..rows.end * STRIP], dst);
+                                    dst
+                                }
                             };
-                            issued += 1;
-                            let call = Call {
-                                w: &packed[i][range.clone()],
-                                b,
-                                active: &active[i][k],
-                                add: k > 0,
-                                ahead,
-                            };
-                            if k + 1 < chunks.len() {
-                                kernel.block(call, &mut sums[blk][ch]);
-                                continue;
+                            for blk in 0..blocks {
+                                let i = ch * blocks + blk;
+                                let ahead = Ahead {
+                                    start: next.0.wrapping_add(issued * per_call * 64),
+                                    lines: per_call.min(lines.saturating_sub(issued * per_call)),
+                                };
+                                issued += 1;
+                                let call = Call {
+                                    w: &packed[i][range.clone()],
+                                    b,
+                                    active: &active[i][k],
+                                    add: k > 0,
+                                    ahead,
+                                };
+                                if k + 1 < chunks.len() {
+                                    kernel.block(call, &mut sums[blk][ch]);
+                                    continue;
+                                }
+                                let cs = blk * MR..(blk * MR + MR).min(cands);
+                                finish(Last {
+                                    call,
+                                    ch,
+                                    sums: &mut sums[blk],
+                                    codes: &mut codes[blk],
+                                    blue: &mut *blue,
+                                    outs: &mut outs[cs],
+                                    local: local.clone(),
+                                });
                             }
-                            let cs = blk * MR..(blk * MR + MR).min(cands);
-                            finish(Last {
-                                call,
-                                ch,
-                                sums: &mut sums[blk],
-                                codes: &mut codes[blk],
-                                outs: &mut outs[cs],
-                                local: local.clone(),
-                            });
                         }
                     }
                 }
-            }
-        });
+            },
+        );
         #[cfg(target_arch = "x86_64")]
         x86::store_fence();
         // A task is at most a millisecond or so: offering the CPU between tasks lets a
@@ -806,9 +822,10 @@ struct Scratch {
     panel: Vec<Line>,
     /// Every register block's sums per channel.
     sums: Vec<[Acc; 3]>,
-    /// Every register block's code planes per channel, for renders that encode in the
-    /// kernel.
-    codes: Vec<[Codes; 3]>,
+    /// For renders that encode in the kernel: every register block's red and green code
+    /// planes (kept until its blue is done, 19 KB a strip in L1), and the blue planes.
+    codes: Vec<[Codes; 2]>,
+    blue: Codes,
 }
 
 thread_local! {
@@ -817,6 +834,7 @@ thread_local! {
             panel: Vec::new(),
             sums: Vec::new(),
             codes: Vec::new(),
+            blue: [[0; STRIP]; MR],
         })
     };
 }
