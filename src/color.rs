@@ -331,18 +331,22 @@ mod x86 {
         }
     }
 
+    /// The byte of value v's code (0..32) in [`Vbmi::words`]: `vpackusdw` packs per
+    /// 128-bit lane, so word j holds value 4 (j / 8) + j % 8 for j % 8 < 4, else that + 12,
+    /// and a code is its word's high byte.
+    const fn code_byte(v: usize) -> u8 {
+        (2 * (8 * (v % 16 / 4) + v % 4 + 4 * (v / 16)) + 1) as u8
+    }
+
     /// Where byte k of the 96 output bytes of 32 pixels (pixel k / 3, channel k % 3) is in
-    /// the 16-bit codes (the high byte of each word): `vpackusdw` packs per 128-bit lane,
-    /// so word j holds pixel 4 (j / 8) + j % 8 for j % 8 < 4, else that + 12. First R
-    /// (0..64) or G (64..128), then B (64..128) laid over the blue bytes; `half` 1 is bytes
-    /// 64..96 (the rest unused).
+    /// the codes of [`Vbmi::words`]. First R (0..64) or G (64..128), then B (64..128) laid
+    /// over the blue bytes; `half` 1 is bytes 64..96 (the rest unused).
     const fn interleave_words(blue: bool, half: usize) -> [u8; 64] {
         let mut idx = [0u8; 64];
         let mut k = 0;
         while k < 64 && 64 * half + k < 96 {
             let (p, c) = ((64 * half + k) / 3, (64 * half + k) % 3);
-            let j = 8 * (p % 16 / 4) + p % 4 + 4 * (p / 16);
-            let byte = (2 * j + 1) as u8;
+            let byte = code_byte(p);
             idx[k] = match (blue, c) {
                 (false, 0) => byte,
                 (false, 1) => 64 + byte,
@@ -363,7 +367,8 @@ mod x86 {
     pub(crate) struct Vbmi {
         rows: [__m512i; 3],
         base: __m512i,
-        /// Byte k of two [`Vbmi::words`] (k < 32 from the first): where value k's code is.
+        /// Byte k of two [`Vbmi::words`] (k < 32 from the first): where value k's code is
+        /// (see [`code_byte`]).
         bytes: __m512i,
     }
 
@@ -380,19 +385,11 @@ mod x86 {
 
         #[target_feature(enable = "avx512f,avx512bw,avx512vbmi,avx512vbmi2")]
         fn load() -> Vbmi {
-            /// `vpackusdw` packs per 128-bit lane: word j of `words` holds value
-            /// 4 (j / 8) + j % 8 for j % 8 < 4, else that + 12; a code is a word's high byte.
             const fn code_bytes() -> [u8; 64] {
                 let mut idx = [0u8; 64];
                 let mut k = 0;
                 while k < 64 {
-                    let v = k % 32;
-                    let j = if v < 16 {
-                        8 * (v / 4) + v % 4
-                    } else {
-                        8 * ((v - 16) / 4) + 4 + v % 4
-                    };
-                    idx[k] = (2 * j + 1 + 64 * (k / 32)) as u8;
+                    idx[k] = code_byte(k % 32) + 64 * (k / 32) as u8;
                     k += 1;
                 }
                 idx
@@ -411,7 +408,7 @@ mod x86 {
         }
 
         /// The codes of 32 values (`a` then `b`, as float bits), each the high byte of a
-        /// word, in `vpackusdw`'s order (see `load`).
+        /// word, in `vpackusdw`'s order (see [`code_byte`]).
         #[inline(always)]
         fn words(self, a: __m512i, b: __m512i) -> __m512i {
             // SAFETY: a Vbmi exists only where the CPU has the features.
