@@ -663,18 +663,8 @@ mod x86 {
 
     /// Every SIMD encoder this CPU runs, widest first, with its lanes.
     pub(super) fn paths() -> Vec<(usize, Path)> {
-        let have = |f: &[bool]| f.iter().all(|&b| b);
         let all: [(bool, usize, Path); 3] = [
-            (
-                have(&[
-                    is_x86_feature_detected!("avx512f"),
-                    is_x86_feature_detected!("avx512bw"),
-                    is_x86_feature_detected!("avx512vbmi"),
-                    is_x86_feature_detected!("avx512vbmi2"),
-                ]),
-                32,
-                encode_avx512_vbmi,
-            ),
+            (Vbmi::new().is_some(), 32, encode_avx512_vbmi),
             (is_x86_feature_detected!("avx512f"), 16, encode_avx512),
             (is_x86_feature_detected!("avx2"), 8, encode_avx2),
         ];
