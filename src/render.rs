@@ -957,11 +957,18 @@ mod tests {
         }
     }
 
-    /// The sRGB render (fused with the kernel where the CPU has VBMI) gives the bytes of the
-    /// generic compositor with the planar encoder, on every kernel, with one chunk and
-    /// several, across the whole curve (gains from dark to overexposed).
+    /// The sRGB encoding inside the AVX-512 kernel (CPUs with VBMI) gives the bytes of the
+    /// generic compositor with the planar encoder, with one chunk and several, across the
+    /// whole curve (gains from dark to overexposed). Elsewhere `composite_srgb8` is that
+    /// generic compositor, so there is nothing to compare.
+    #[cfg(target_arch = "x86_64")]
     #[test]
     fn srgb8_render_matches_the_planar_encoder() {
+        if crate::color::Vbmi::new().is_none() {
+            eprintln!("note: this CPU lacks AVX-512 VBMI; the in-kernel encoding is not tested");
+            return;
+        }
+        let kernel = Kernel::Avx512;
         let (w, h, lights, planes) = planes();
         let looks = looks(lights);
         let refs: Vec<&Look> = looks.iter().collect();
@@ -969,37 +976,28 @@ mod tests {
             let basis = BasisImages::from_planes(w, h, lights, &planes, precision);
             for gain in [0.004, 0.05, 0.7] {
                 let wts = weights(&refs, gain);
-                for kernel in Kernel::ALL.into_iter().filter(|k| k.supported()) {
-                    for chunk in [CHUNK_LIGHTS, 3] {
-                        let mut want = zeroed_outputs(looks.len(), w * h * 3);
-                        composite_chunked(
-                            kernel,
-                            &basis,
-                            &wts,
-                            &mut want,
-                            chunk,
-                            encode_srgb8_planar,
-                        );
-                        let mut got = zeroed_outputs(looks.len(), w * h * 3);
-                        composite_srgb8_chunked(kernel, &basis, &wts, &mut got, chunk);
-                        for (k, (got, want)) in got.iter().zip(&want).enumerate() {
-                            if let Some(i) = (0..got.len()).find(|&i| got[i] != want[i]) {
-                                panic!(
-                                    "{kernel:?} {precision:?} gain {gain} chunk {chunk} look {k} byte {i}: {} vs {}",
-                                    got[i], want[i]
-                                );
-                            }
+                for chunk in [CHUNK_LIGHTS, 3] {
+                    let mut want = zeroed_outputs(looks.len(), w * h * 3);
+                    composite_chunked(kernel, &basis, &wts, &mut want, chunk, encode_srgb8_planar);
+                    let mut got = zeroed_outputs(looks.len(), w * h * 3);
+                    composite_srgb8_chunked(kernel, &basis, &wts, &mut got, chunk);
+                    for (k, (got, want)) in got.iter().zip(&want).enumerate() {
+                        if let Some(i) = (0..got.len()).find(|&i| got[i] != want[i]) {
+                            panic!(
+                                "{precision:?} gain {gain} chunk {chunk} look {k} byte {i}: {} vs {}",
+                                got[i], want[i]
+                            );
                         }
-                        let distinct = want
-                            .iter()
-                            .flatten()
-                            .collect::<std::collections::BTreeSet<_>>();
-                        assert!(
-                            distinct.len() > 40,
-                            "gain {gain}: only {} codes",
-                            distinct.len()
-                        );
                     }
+                    let distinct = want
+                        .iter()
+                        .flatten()
+                        .collect::<std::collections::BTreeSet<_>>();
+                    assert!(
+                        distinct.len() > 40,
+                        "gain {gain}: only {} codes",
+                        distinct.len()
+                    );
                 }
             }
         }
