@@ -95,8 +95,8 @@ impl BasisImages {
             height,
             lights,
             samples: match precision {
-                Precision::Half => Samples::Half(vec![f16::ZERO; n]),
-                Precision::Single => Samples::Single(vec![0.0; n]),
+                Precision::Half => Samples::Half(in_huge_pages(n, f16::ZERO)),
+                Precision::Single => Samples::Single(in_huge_pages(n, 0.0)),
             },
         }
     }
@@ -208,6 +208,35 @@ impl BasisImages {
             Samples::Single(d) => d.len() * std::mem::size_of::<f32>(),
         }
     }
+}
+
+/// `n` copies of `zero` in memory the kernel is asked to back with 2 MiB pages, before any
+/// of it is touched. The compositor streams the whole basis every render; with 4 KiB pages
+/// that is a TLB miss every 4 KiB, each a two-level walk in a virtual machine. Renders from
+/// a basis in huge pages took 0.97 of the time in same-process pairs (44 lights). The
+/// advice is only a hint: where the kernel declines, the pages are ordinary ones.
+fn in_huge_pages<T: Copy>(n: usize, zero: T) -> Vec<T> {
+    let mut v = Vec::with_capacity(n);
+    #[cfg(target_os = "linux")]
+    {
+        const HUGE: usize = 2 << 20;
+        let spare = v.spare_capacity_mut();
+        let start = spare.as_ptr() as usize;
+        let (lo, hi) = (
+            start.next_multiple_of(HUGE),
+            (start + size_of_val(spare)) / HUGE * HUGE,
+        );
+        // SAFETY: the range is inside this allocation; MADV_HUGEPAGE changes how the kernel
+        // backs it, never its contents or validity.
+        if hi > lo && unsafe { libc::madvise(lo as *mut _, hi - lo, libc::MADV_HUGEPAGE) } != 0 {
+            tracing::debug!(
+                "huge pages declined for the basis images: {}",
+                std::io::Error::last_os_error()
+            );
+        }
+    }
+    v.resize(n, zero);
+    v
 }
 
 /// A decoded linear RGB image, interleaved.
