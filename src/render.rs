@@ -674,50 +674,16 @@ fn run<O: Send>(
     finish: impl Fn(Last<'_, '_, O>) + Sync,
 ) {
     assert!(kernel.supported(), "{kernel:?} does not run on this CPU");
-    let (pixels, lights) = (basis.pixels(), basis.lights);
+    let pixels = basis.pixels();
     assert!(outputs.iter().all(|o| o.len() == pixels * 3));
-    assert!(weights.iter().all(|w| w.len() >= lights));
+    assert!(weights.iter().all(|w| w.len() >= basis.lights));
     let cands = weights.len().min(outputs.len());
-    if cands == 0 || pixels == 0 || lights == 0 {
+    if cands == 0 || pixels == 0 || basis.lights == 0 {
         return;
     }
-    // Weights per channel and block of MR candidates, `[light][candidate]` (missing
-    // candidates weigh 0), and per block and chunk the lights (numbered within the chunk)
-    // that contribute at all.
-    let blocks = cands.div_ceil(MR);
-    // Chunks of at most `chunk` lights, of near-equal size: 267 lights are 4 chunks of 54 and
-    // one of 51, not 4 of 64 and one of 11 whose per-call overhead would outweigh its work.
-    let size = lights.div_ceil(lights.div_ceil(chunk.max(1)));
-    let chunks: Vec<std::ops::Range<usize>> = (0..lights)
-        .step_by(size)
-        .map(|l| l..(l + size).min(lights))
-        .collect();
-    let packed: Vec<Vec<[f32; MR]>> = (0..3 * blocks)
-        .map(|i| {
-            let (ch, blk) = (i / blocks, i % blocks);
-            (0..lights)
-                .map(|l| {
-                    std::array::from_fn(|r| weights.get(blk * MR + r).map_or(0.0, |w| w[l][ch]))
-                })
-                .collect()
-        })
-        .collect();
-    let active: Vec<Vec<Vec<u32>>> = packed
-        .iter()
-        .map(|w| {
-            chunks
-                .iter()
-                .map(|c| {
-                    (0..c.len() as u32)
-                        .filter(|&l| w[c.start + l as usize] != [0.0; MR])
-                        .collect()
-                })
-                .collect()
-        })
-        .collect();
-    let strips = pixels.div_ceil(STRIP);
+    let plan = Plan::new(kernel, basis, &weights[..cands], chunk);
     let threads = rayon::current_num_threads().max(1);
-    let task_strips = (strips / (8 * threads)).clamp(1, TASK_STRIPS);
+    let task_strips = (plan.strips / (8 * threads)).clamp(1, TASK_STRIPS);
     let task_px = task_strips * STRIP;
     let mut tasks: Vec<Vec<&mut [O]>> = (0..pixels.div_ceil(task_px))
         .map(|_| Vec::with_capacity(cands))
@@ -727,85 +693,21 @@ fn run<O: Send>(
             tasks[t].push(chunk);
         }
     }
-    // Kernel calls per strip, over which the next strip's prefetch is shared out.
-    let calls = blocks * 3 * chunks.len();
     tasks.into_par_iter().enumerate().for_each(|(t, mut outs)| {
-        SCRATCH.with_borrow_mut(
-            |Scratch {
-                 panel,
-                 sums,
-                 codes,
-                 blue,
-             }| {
-                sums.resize(blocks, [[[0.0; STRIP]; MR]; 3]);
-                codes.resize(blocks, [[[0; STRIP]; MR]; 2]);
-                panel.resize(size, Line([0.0; STRIP]));
-                for s in 0..task_strips {
-                    let start = t * task_px + s * STRIP;
-                    if start >= pixels {
-                        break;
-                    }
-                    let len = (pixels - start).min(STRIP);
-                    let strip = start / STRIP;
-                    let src = basis.panel(strip);
-                    let next = match (strip + 1 < strips).then(|| basis.panel(strip + 1)) {
-                        Some(Panel::Single(p)) => (p.as_ptr().cast::<u8>(), size_of_val(p)),
-                        Some(Panel::Half(p)) => (p.as_ptr().cast::<u8>(), size_of_val(p)),
-                        None => (std::ptr::null(), 0),
-                    };
-                    let lines = next.1.div_ceil(64);
-                    let per_call = lines.div_ceil(calls);
-                    let mut issued = 0;
-                    let local = s * STRIP * 3..(s * STRIP + len) * 3;
-                    for ch in 0..3 {
-                        for (k, range) in chunks.iter().enumerate() {
-                            let rows = ch * lights + range.start..ch * lights + range.end;
-                            // A half-float chunk is widened just before the blocks that read it, so
-                            // its floats are written to and read from L1. Widening the whole
-                            // strip first (50 KB at 44 lights) sent them through L2: 3% slower
-                            // at 44 and 267 lights in same-run measurements.
-                            let b: &[Row] = match src {
-                                Panel::Single(p) => &p.as_chunks().0[rows],
-                                Panel::Half(p) => {
-                                    let dst = &mut Line::rows_mut(panel)[..range.len()];
-                                    widen(kernel, &p[rows.start * STRIP..rows.end * STRIP], dst);
-                                    dst
-                                }
-                            };
-                            for blk in 0..blocks {
-                                let i = ch * blocks + blk;
-                                let ahead = Ahead {
-                                    start: next.0.wrapping_add(issued * per_call * 64),
-                                    lines: per_call.min(lines.saturating_sub(issued * per_call)),
-                                };
-                                issued += 1;
-                                let call = Call {
-                                    w: &packed[i][range.clone()],
-                                    b,
-                                    active: &active[i][k],
-                                    add: k > 0,
-                                    ahead,
-                                };
-                                if k + 1 < chunks.len() {
-                                    kernel.block(call, &mut sums[blk][ch]);
-                                    continue;
-                                }
-                                let cs = blk * MR..(blk * MR + MR).min(cands);
-                                finish(Last {
-                                    call,
-                                    ch,
-                                    sums: &mut sums[blk],
-                                    codes: &mut codes[blk],
-                                    blue: &mut *blue,
-                                    outs: &mut outs[cs],
-                                    local: local.clone(),
-                                });
-                            }
-                        }
-                    }
-                }
-            },
-        );
+        SCRATCH.with_borrow_mut(|scratch| {
+            scratch.fit(&plan);
+            for start in (t * task_px..pixels.min((t + 1) * task_px)).step_by(STRIP) {
+                let local = start - t * task_px;
+                let len = (pixels - start).min(STRIP);
+                plan.strip(
+                    start / STRIP,
+                    scratch,
+                    &mut outs,
+                    local * 3..(local + len) * 3,
+                    &finish,
+                );
+            }
+        });
         #[cfg(target_arch = "x86_64")]
         x86::store_fence();
         // A task is at most a millisecond or so: offering the CPU between tasks lets a
@@ -813,6 +715,158 @@ fn run<O: Send>(
         // slice ends, which measurably cuts late frames during generates (~1 us per task).
         std::thread::yield_now();
     });
+}
+
+/// What every strip of a render shares: the weights packed per register block, and the
+/// lights cut into chunks.
+struct Plan<'a> {
+    kernel: Kernel,
+    basis: &'a BasisImages,
+    strips: usize,
+    blocks: usize,
+    /// Chunks of lights, of near-equal size: 267 lights are 4 chunks of 54 and one of 51,
+    /// not 4 of 64 and one of 11 whose per-call overhead would outweigh its work.
+    chunks: Vec<std::ops::Range<usize>>,
+    /// The longest chunk, in lights.
+    size: usize,
+    /// Weights per channel and block of MR candidates, `[light][candidate]` (missing
+    /// candidates weigh 0).
+    packed: Vec<Vec<[f32; MR]>>,
+    /// Per channel and block, and per chunk, the lights (numbered within the chunk) that
+    /// contribute at all.
+    active: Vec<Vec<Vec<u32>>>,
+}
+
+impl<'a> Plan<'a> {
+    fn new(
+        kernel: Kernel,
+        basis: &'a BasisImages,
+        weights: &[Vec<[f32; 3]>],
+        chunk: usize,
+    ) -> Self {
+        let lights = basis.lights;
+        let blocks = weights.len().div_ceil(MR);
+        let size = lights.div_ceil(lights.div_ceil(chunk.max(1)));
+        let chunks: Vec<std::ops::Range<usize>> = (0..lights)
+            .step_by(size)
+            .map(|l| l..(l + size).min(lights))
+            .collect();
+        let packed: Vec<Vec<[f32; MR]>> = (0..3 * blocks)
+            .map(|i| {
+                let (ch, blk) = (i / blocks, i % blocks);
+                (0..lights)
+                    .map(|l| {
+                        std::array::from_fn(|r| weights.get(blk * MR + r).map_or(0.0, |w| w[l][ch]))
+                    })
+                    .collect()
+            })
+            .collect();
+        let active = packed
+            .iter()
+            .map(|w| {
+                chunks
+                    .iter()
+                    .map(|c| {
+                        (0..c.len() as u32)
+                            .filter(|&l| w[c.start + l as usize] != [0.0; MR])
+                            .collect()
+                    })
+                    .collect()
+            })
+            .collect();
+        Plan {
+            kernel,
+            basis,
+            strips: basis.pixels().div_ceil(STRIP),
+            blocks,
+            chunks,
+            size,
+            packed,
+            active,
+        }
+    }
+
+    /// Renders strip `strip` into the `local` bytes of the outputs (one per candidate).
+    fn strip<O>(
+        &self,
+        strip: usize,
+        scratch: &mut Scratch,
+        outs: &mut [&mut [O]],
+        local: std::ops::Range<usize>,
+        finish: &impl Fn(Last<'_, '_, O>),
+    ) {
+        let Plan {
+            kernel,
+            basis,
+            blocks,
+            ref chunks,
+            ..
+        } = *self;
+        let lights = basis.lights;
+        let Scratch {
+            panel,
+            sums,
+            codes,
+            blue,
+        } = scratch;
+        let src = basis.panel(strip);
+        // The next strip's panel is prefetched, its lines shared out over this strip's
+        // kernel calls.
+        let next = match (strip + 1 < self.strips).then(|| basis.panel(strip + 1)) {
+            Some(Panel::Single(p)) => (p.as_ptr().cast::<u8>(), size_of_val(p)),
+            Some(Panel::Half(p)) => (p.as_ptr().cast::<u8>(), size_of_val(p)),
+            None => (std::ptr::null(), 0),
+        };
+        let lines = next.1.div_ceil(64);
+        let per_call = lines.div_ceil(blocks * 3 * chunks.len());
+        let mut issued = 0;
+        for ch in 0..3 {
+            for (k, range) in chunks.iter().enumerate() {
+                let rows = ch * lights + range.start..ch * lights + range.end;
+                // A half-float chunk is widened just before the blocks that read it, so its
+                // floats are written to and read from L1. Widening the whole strip first
+                // (50 KB at 44 lights) sent them through L2: 3% slower at 44 and 267 lights
+                // in same-run measurements.
+                let b: &[Row] = match src {
+                    Panel::Single(p) => &p.as_chunks().0[rows],
+                    Panel::Half(p) => {
+                        let dst = &mut Line::rows_mut(panel)[..range.len()];
+                        widen(kernel, &p[rows.start * STRIP..rows.end * STRIP], dst);
+                        dst
+                    }
+                };
+                for blk in 0..blocks {
+                    let i = ch * blocks + blk;
+                    let ahead = Ahead {
+                        start: next.0.wrapping_add(issued * per_call * 64),
+                        lines: per_call.min(lines.saturating_sub(issued * per_call)),
+                    };
+                    issued += 1;
+                    let call = Call {
+                        w: &self.packed[i][range.clone()],
+                        b,
+                        active: &self.active[i][k],
+                        add: k > 0,
+                        ahead,
+                    };
+                    if k + 1 < chunks.len() {
+                        kernel.block(call, &mut sums[blk][ch]);
+                        continue;
+                    }
+                    let cs = blk * MR..(blk * MR + MR).min(outs.len());
+                    finish(Last {
+                        call,
+                        ch,
+                        sums: &mut sums[blk],
+                        codes: &mut codes[blk],
+                        blue: &mut *blue,
+                        outs: &mut outs[cs],
+                        local: local.clone(),
+                    });
+                }
+            }
+        }
+    }
 }
 
 /// A thread's working memory, kept between renders (allocating and zeroing it per task
@@ -826,6 +880,15 @@ struct Scratch {
     /// planes (kept until its blue is done, 19 KB a strip in L1), and the blue planes.
     codes: Vec<[Codes; 2]>,
     blue: Codes,
+}
+
+impl Scratch {
+    /// Sizes the buffers for `plan`'s renders.
+    fn fit(&mut self, plan: &Plan) {
+        self.sums.resize(plan.blocks, [[[0.0; STRIP]; MR]; 3]);
+        self.codes.resize(plan.blocks, [[[0; STRIP]; MR]; 2]);
+        self.panel.resize(plan.size, Line([0.0; STRIP]));
+    }
 }
 
 thread_local! {
