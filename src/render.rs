@@ -286,31 +286,10 @@ mod x86 {
         local: std::ops::Range<usize>,
     ) {
         for (r, out) in outs.iter_mut().enumerate() {
-            vbmi.interleave(
+            vbmi.stream_interleaved(
                 [&codes[0][r], &codes[1][r], &codes[2][r]],
                 &mut out[local.clone()],
             );
-        }
-    }
-
-    /// Asks for the cache lines of each output's `local` bytes, to be written: the last
-    /// kernel call of a block runs while they arrive, rather than its stores waiting for
-    /// them (2% faster at 44 lights in same-run pairs). PREFETCHW is in inline assembly
-    /// (its target feature is not stable in Rust); every CPU with AVX-512 VBMI has it.
-    pub(super) fn prefetch_for_writing(outs: &[&mut [u8]], local: std::ops::Range<usize>) {
-        for out in outs {
-            let bytes = &out[local.clone()];
-            for at in (0..bytes.len())
-                .step_by(64)
-                .chain([bytes.len().saturating_sub(1)])
-            {
-                let line = bytes.as_ptr().wrapping_add(at);
-                // SAFETY: a prefetch is a hint: it reads and writes nothing and never
-                // faults; the address is inside `bytes` anyway.
-                unsafe {
-                    std::arch::asm!("prefetchw [{0}]", in(reg) line, options(nostack, preserves_flags, readonly));
-                }
-            }
         }
     }
 
@@ -595,9 +574,6 @@ fn composite_srgb8_chunked(
     {
         return run(kernel, basis, weights, outputs, chunk, |last| {
             let ch = last.ch;
-            if ch == 2 {
-                x86::prefetch_for_writing(last.outs, last.local.clone());
-            }
             let plane = match ch {
                 2 => &mut *last.blue,
                 _ => &mut last.codes[ch],
