@@ -213,7 +213,7 @@ impl BasisImages {
 /// `n` copies of `zero` in memory the kernel is asked to back with 2 MiB pages, before any
 /// of it is touched. The compositor streams the whole basis every render; with 4 KiB pages
 /// that is a TLB miss every 4 KiB, each a two-level walk in a virtual machine. Renders from
-/// a basis in huge pages took 0.97 of the time in same-process pairs (44 lights). The
+/// a basis in huge pages took 0.98-0.99 of the time in same-process pairs (44 lights). The
 /// advice is only a hint: where the kernel declines, the pages are ordinary ones.
 fn in_huge_pages<T: Copy>(n: usize, zero: T) -> Vec<T> {
     let mut v = Vec::with_capacity(n);

@@ -277,7 +277,8 @@ mod x86 {
     }
 
     /// Interleaves each candidate's red, green and blue code planes into its output's
-    /// `local` bytes.
+    /// `local` bytes, whole cache lines with non-temporal stores (`run` fences at the end of
+    /// each task).
     #[target_feature(enable = "avx512f,avx512bw,avx512vbmi,avx512vbmi2")]
     pub(super) fn emit_codes(
         vbmi: Vbmi,
@@ -714,6 +715,8 @@ struct Plan<'a> {
 }
 
 impl<'a> Plan<'a> {
+    /// The plan for rendering `weights` (one per candidate) from `basis`, the lights cut
+    /// into chunks of at most `chunk`.
     fn new(
         kernel: Kernel,
         basis: &'a BasisImages,
