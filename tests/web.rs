@@ -5,25 +5,18 @@
 mod common;
 
 use std::io::{Read, Write};
-use std::net::{SocketAddr, TcpListener, TcpStream};
+use std::net::{IpAddr, SocketAddr, TcpStream};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use common::daemon::{Daemon, Osc, PATIENCE, Proto, int};
+use common::daemon::{Daemon, Osc, PATIENCE, Proto, free_port, int};
 use common::temp_dir;
-
-/// A free loopback TCP port for the web gallery.
-fn free_port() -> u16 {
-    TcpListener::bind("127.0.0.1:0")
-        .and_then(|l| l.local_addr())
-        .expect("a free port")
-        .port()
-}
 
 /// A daemon with the web gallery on; returns it and the gallery's address.
 fn start(name: &str) -> (Daemon, SocketAddr) {
-    let port = free_port();
+    let lo = IpAddr::from([127, 0, 0, 1]);
+    let port = free_port(lo, lo);
     let d = Daemon::start_with(name, &format!("\n[http]\nlisten = \"127.0.0.1:{port}\"\n"));
     let addr = SocketAddr::from(([127, 0, 0, 1], port));
     // OSC answers before the web listener is up: wait for it (bounded).

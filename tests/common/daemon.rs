@@ -10,7 +10,7 @@ use std::io::{ErrorKind, Read, Write};
 use std::net::{IpAddr, Ipv4Addr, SocketAddr, TcpListener, TcpStream, UdpSocket};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
-use std::sync::atomic::{AtomicBool, AtomicI32, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicI32, AtomicU16, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
@@ -1038,12 +1038,18 @@ pub fn look_mismatch(look: &[Light], dmx: &BTreeMap<u16, Vec<u8>>) -> Option<Str
 
 // ---- the daemon --------------------------------------------------------------------------
 
-/// A port that is free for UDP on `udp` and TCP on `tcp` right now.
-fn free_port(udp: IpAddr, tcp: IpAddr) -> u16 {
+/// A port that is free for UDP on `udp` and TCP on `tcp` right now, and that no other call
+/// in this process hands out. The ports come from below Linux's ephemeral range (which
+/// starts at 32768), where the kernel never picks a port for a socket bound to port 0: a
+/// daemon restarting after `kill -9` once found its port taken by another test's client
+/// socket, which the kernel had given it in the moment the port was free.
+pub fn free_port(udp: IpAddr, tcp: IpAddr) -> u16 {
+    static NEXT: AtomicU16 = AtomicU16::new(0);
+    // Test binaries run one at a time, but give each process its own stretch anyway.
+    let base = 20_000 + (std::process::id() % 24) as u16 * 500;
     loop {
-        let sock = UdpSocket::bind((udp, 0)).expect("bind");
-        let port = sock.local_addr().expect("addr").port();
-        if TcpListener::bind((tcp, port)).is_ok() {
+        let port = base + NEXT.fetch_add(1, Ordering::Relaxed) % 500;
+        if UdpSocket::bind((udp, port)).is_ok() && TcpListener::bind((tcp, port)).is_ok() {
             return port;
         }
     }
