@@ -660,7 +660,7 @@ fn run<O: Send>(
     }
     let plan = Plan::new(kernel, basis, &weights[..cands], chunk);
     let threads = rayon::current_num_threads().max(1);
-    let task_strips = (plan.strips / (8 * threads)).clamp(1, TASK_STRIPS);
+    let task_strips = (basis.strips() / (8 * threads)).clamp(1, TASK_STRIPS);
     let task_px = task_strips * STRIP;
     let mut tasks: Vec<Vec<&mut [O]>> = (0..pixels.div_ceil(task_px))
         .map(|_| Vec::with_capacity(cands))
@@ -699,7 +699,6 @@ fn run<O: Send>(
 struct Plan<'a> {
     kernel: Kernel,
     basis: &'a BasisImages,
-    strips: usize,
     blocks: usize,
     /// Chunks of lights, of near-equal size: 267 lights are 4 chunks of 54 and one of 51,
     /// not 4 of 64 and one of 11 whose per-call overhead would outweigh its work.
@@ -756,7 +755,6 @@ impl<'a> Plan<'a> {
         Plan {
             kernel,
             basis,
-            strips: basis.pixels().div_ceil(STRIP),
             blocks,
             chunks,
             size,
@@ -791,7 +789,7 @@ impl<'a> Plan<'a> {
         let src = basis.panel(strip);
         // The next strip's panel is prefetched, its lines shared out over this strip's
         // kernel calls.
-        let next = match (strip + 1 < self.strips).then(|| basis.panel(strip + 1)) {
+        let next = match (strip + 1 < basis.strips()).then(|| basis.panel(strip + 1)) {
             Some(Panel::Single(p)) => (p.as_ptr().cast::<u8>(), size_of_val(p)),
             Some(Panel::Half(p)) => (p.as_ptr().cast::<u8>(), size_of_val(p)),
             None => (std::ptr::null(), 0),
