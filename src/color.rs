@@ -338,15 +338,18 @@ mod x86 {
         (2 * (8 * (v % 16 / 4) + v % 4 + 4 * (v / 16)) + 1) as u8
     }
 
-    /// Where byte k of the 96 output bytes of 32 pixels (pixel k / 3, channel k % 3) is in
-    /// the codes of [`Vbmi::words`]. First R (0..64) or G (64..128), then B (64..128) laid
-    /// over the blue bytes; `half` 1 is bytes 64..96 (the rest unused).
-    const fn interleave_words(blue: bool, half: usize) -> [u8; 64] {
+    /// The indices of the two byte permutes that make output bytes 64j..64j + 64 of
+    /// interleaved RGB (byte m is pixel m / 3's channel m % 3): the first picks red and
+    /// green (from a red and a green register), the second keeps those and picks blue (from
+    /// a blue register). The codes are in [`Vbmi::words`]' order (32 pixels a register) if
+    /// `words`, else in pixel order (64 pixels a register); bytes past them are left 0.
+    const fn interleave_index(j: usize, blue: bool, words: bool) -> [u8; 64] {
+        let pixels = if words { 32 } else { 64 };
         let mut idx = [0u8; 64];
         let mut k = 0;
-        while k < 64 && 64 * half + k < 96 {
-            let (p, c) = ((64 * half + k) / 3, (64 * half + k) % 3);
-            let byte = code_byte(p);
+        while k < 64 && (64 * j + k) / 3 < pixels {
+            let (p, c) = ((64 * j + k) / 3, (64 * j + k) % 3);
+            let byte = if words { code_byte(p) } else { p as u8 };
             idx[k] = match (blue, c) {
                 (false, 0) => byte,
                 (false, 1) => 64 + byte,
@@ -461,7 +464,7 @@ mod x86 {
 
         /// Interleaves planes of 96 red, green and blue codes into RGB pixels: the first
         /// `min(out.len(), 288)` bytes of `out`. Per 64 bytes, a two-table byte permute for
-        /// red and green and a masked one for blue; then one more two-table permute per
+        /// red and green and one for blue ([`interleave_index`]); then one more per
         /// cache line realigns those bytes to `out`'s lines, so every line wholly inside
         /// `out` is written by one non-temporal store. A line written whole need not be read
         /// from memory first: for 100 thumbnails at 44 lights that read was 12% of the
@@ -471,26 +474,20 @@ mod x86 {
         /// Before another thread reads `out`, this one must fence (`_mm_sfence`).
         #[inline(always)]
         pub(crate) fn stream_interleaved(self, planes: [&[u8; 96]; 3], out: &mut [u8]) {
-            /// Output byte 64j + m is pixel p = (64j + m) / 3's channel (64j + m) % 3: the
-            /// red and green picks (p, 64 + p), the blue picks p and the blue mask.
-            const fn index(j: usize) -> ([u8; 64], [u8; 64], u64) {
-                let (mut rg, mut b, mut mask) = ([0u8; 64], [0u8; 64], 0u64);
-                let mut m = 0;
-                while m < 64 {
-                    let (p, c) = ((64 * j + m) / 3, (64 * j + m) % 3);
-                    match c {
-                        0 => rg[m] = p as u8,
-                        1 => rg[m] = 64 + p as u8,
-                        _ => {
-                            b[m] = p as u8;
-                            mask |= 1 << m;
-                        }
-                    }
-                    m += 1;
-                }
-                (rg, b, mask)
-            }
-            const INDEX: [([u8; 64], [u8; 64], u64); 3] = [index(0), index(1), index(2)];
+            const INDEX: [[[u8; 64]; 2]; 3] = [
+                [
+                    interleave_index(0, false, false),
+                    interleave_index(0, true, false),
+                ],
+                [
+                    interleave_index(1, false, false),
+                    interleave_index(1, true, false),
+                ],
+                [
+                    interleave_index(2, false, false),
+                    interleave_index(2, true, false),
+                ],
+            ];
             const IOTA: [u8; 64] = {
                 let mut iota = [0u8; 64];
                 let mut k = 0;
@@ -518,11 +515,11 @@ mod x86 {
                     let r = _mm512_maskz_loadu_epi8(load, planes[0].as_ptr().add(px).cast());
                     let g = _mm512_maskz_loadu_epi8(load, planes[1].as_ptr().add(px).cast());
                     let b = _mm512_maskz_loadu_epi8(load, planes[2].as_ptr().add(px).cast());
-                    for (j, (rg, bi, bm)) in INDEX.iter().enumerate().take(3 - half) {
+                    for (j, [rg, bi]) in INDEX.iter().enumerate().take(3 - half) {
                         let rg = _mm512_loadu_si512(rg.as_ptr().cast());
                         let bi = _mm512_loadu_si512(bi.as_ptr().cast());
                         let v = _mm512_permutex2var_epi8(r, rg, g);
-                        bytes[3 * half + j] = _mm512_mask_permutexvar_epi8(v, *bm, bi, b);
+                        bytes[3 * half + j] = _mm512_permutex2var_epi8(v, bi, b);
                     }
                 }
                 // Line l holds output bytes 64l - off.. : byte k is byte 64 - off + k of
@@ -554,8 +551,14 @@ mod x86 {
     #[target_feature(enable = "avx512f,avx512bw,avx512vbmi,avx512vbmi2")]
     fn encode_avx512_vbmi(rgb: [&[f32]; 3], out: &mut [u8]) -> usize {
         const INDEX: [[[u8; 64]; 2]; 2] = [
-            [interleave_words(false, 0), interleave_words(true, 0)],
-            [interleave_words(false, 1), interleave_words(true, 1)],
+            [
+                interleave_index(0, false, true),
+                interleave_index(0, true, true),
+            ],
+            [
+                interleave_index(1, false, true),
+                interleave_index(1, true, true),
+            ],
         ];
         let n = rgb.iter().fold(out.len() / 3, |n, p| n.min(p.len())) / 32 * 32;
         let vbmi = Vbmi::load();
