@@ -276,21 +276,25 @@ mod x86 {
         vbmi.plane(&c[3], p3);
     }
 
-    /// Interleaves each candidate's red, green and blue code planes into its output's
-    /// `local` bytes, whole cache lines with non-temporal stores (`run` fences at the end of
-    /// each task).
+    /// The register block's blue sums encoded straight from the registers and interleaved
+    /// with its red and green code planes into each candidate's output's `local` bytes,
+    /// whole cache lines with non-temporal stores (`run` fences at the end of each task).
     #[target_feature(enable = "avx512f,avx512bw,avx512vbmi,avx512vbmi2")]
-    pub(super) fn emit_codes(
+    pub(super) fn emit_avx512(
+        call: Call,
+        acc: &Acc,
         vbmi: Vbmi,
-        codes: [&Codes; 3],
+        codes: &[Codes; 2],
         outs: &mut [&mut [u8]],
         local: std::ops::Range<usize>,
     ) {
+        // SAFETY: this function's features include AVX-512F.
+        let c = unsafe { sums_avx512(call, acc) };
+        // The sums go to the stack once, each then read by the instruction that uses it
+        // (written out per candidate instead, with a closure, it was called, not inlined).
         for (r, out) in outs.iter_mut().enumerate() {
-            vbmi.stream_interleaved(
-                [&codes[0][r], &codes[1][r], &codes[2][r]],
-                &mut out[local.clone()],
-            );
+            let planes = [&codes[0][r], &codes[1][r]];
+            vbmi.stream_interleaved(planes, &c[r], &mut out[local.clone()]);
         }
     }
 
@@ -574,17 +578,15 @@ fn composite_srgb8_chunked(
         && let Some(vbmi) = crate::color::Vbmi::new()
     {
         return run(kernel, basis, weights, outputs, chunk, |last| {
-            let ch = last.ch;
-            let plane = match ch {
-                2 => &mut *last.blue,
-                _ => &mut last.codes[ch],
-            };
-            // SAFETY: Vbmi::new() checked AVX-512 F, BW, VBMI and VBMI2.
-            unsafe { x86::codes_avx512(last.call, &last.sums[ch], vbmi, plane) };
-            if ch == 2 {
-                let planes = [&last.codes[0], &last.codes[1], &*last.blue];
+            let (ch, acc) = (last.ch, &last.sums[last.ch]);
+            if ch < 2 {
+                // SAFETY: Vbmi::new() checked AVX-512 F, BW, VBMI and VBMI2.
+                unsafe { x86::codes_avx512(last.call, acc, vbmi, &mut last.codes[ch]) };
+            } else {
                 // SAFETY: as above.
-                unsafe { x86::emit_codes(vbmi, planes, last.outs, last.local) };
+                unsafe {
+                    x86::emit_avx512(last.call, acc, vbmi, last.codes, last.outs, last.local)
+                };
             }
         });
     }
@@ -628,13 +630,11 @@ struct Last<'a, 'o, O> {
     ch: usize,
     /// The block's sums per channel.
     sums: &'a mut [Acc; 3],
-    /// For renders that encode in the kernel: the block's red and green code planes, and
-    /// the blue one, which every block shares (it is interleaved as soon as it is made).
+    /// For renders that encode in the kernel: the block's red and green code planes (blue
+    /// is interleaved with them straight from the registers).
     // Only the x86-64 in-kernel encoding reads them.
     #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
     codes: &'a mut [Codes; 2],
-    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
-    blue: &'a mut Codes,
     /// The block's candidates' outputs, of which this strip is `local`.
     outs: &'a mut [&'o mut [O]],
     local: std::ops::Range<usize>,
@@ -780,12 +780,7 @@ impl<'a> Plan<'a> {
             ..
         } = *self;
         let lights = basis.lights;
-        let Scratch {
-            panel,
-            sums,
-            codes,
-            blue,
-        } = scratch;
+        let Scratch { panel, sums, codes } = scratch;
         let src = basis.panel(strip);
         // The next strip's panel is prefetched, its lines shared out over this strip's
         // kernel calls.
@@ -836,7 +831,6 @@ impl<'a> Plan<'a> {
                         ch,
                         sums: &mut sums[blk],
                         codes: &mut codes[blk],
-                        blue: &mut *blue,
                         outs: &mut outs[cs],
                         local: local.clone(),
                     });
@@ -854,9 +848,8 @@ struct Scratch {
     /// Every register block's sums per channel.
     sums: Vec<[Acc; 3]>,
     /// For renders that encode in the kernel: every register block's red and green code
-    /// planes (kept until its blue is done, 19 KB a strip in L1), and the blue planes.
+    /// planes, kept until its blue is done (19 KB a strip, in L1).
     codes: Vec<[Codes; 2]>,
-    blue: Codes,
 }
 
 impl Scratch {
@@ -874,7 +867,6 @@ thread_local! {
             panel: Vec::new(),
             sums: Vec::new(),
             codes: Vec::new(),
-            blue: [[0; STRIP]; MR],
         })
     };
 }
