@@ -290,8 +290,9 @@ mod x86 {
     ) {
         // SAFETY: this function's features include AVX-512F.
         let c = unsafe { sums_avx512(call, acc) };
-        // The sums go to the stack once, each then read by the instruction that uses it
-        // (written out per candidate instead, with a closure, it was called, not inlined).
+        // The loop stores the sums to the stack once, each then read by the instruction
+        // that uses it: written out per candidate (a macro, the sums left in registers) it
+        // measured the same, and with a closure the closure was called, not inlined.
         for (r, out) in outs.iter_mut().enumerate() {
             let planes = [&codes[0][r], &codes[1][r]];
             vbmi.stream_interleaved(planes, &c[r], &mut out[local.clone()]);
