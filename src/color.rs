@@ -504,11 +504,15 @@ mod x86 {
                 idx
             };
             // LANES[m]: lanes k with k % 3 == m.
-            const LANES: [u64; 3] = [
-                0x9249_2492_4924_9249,
-                0x2492_4924_9249_2492,
-                0x4924_9249_2492_4924,
-            ];
+            const LANES: [u64; 3] = {
+                let mut lanes = [0u64; 3];
+                let mut k = 0;
+                while k < 64 {
+                    lanes[k % 3] |= 1 << k;
+                    k += 1;
+                }
+                lanes
+            };
             const IOTA: [u8; 64] = {
                 let mut iota = [0u8; 64];
                 let mut k = 0;
@@ -964,7 +968,7 @@ mod tests {
             std::array::from_fn(|c| std::array::from_fn(|p| (7 * p + 100 * c) as u8));
         // Blue as values whose codes differ from pixel to pixel and span 0..255.
         let blue: [f32; 96] = std::array::from_fn(|p| ((p * 37) % 96) as f32 / 95.0);
-        let codes: Vec<[u8; 96]> = vec![planes[0], planes[1], blue.map(encode_srgb8)];
+        let codes = [planes[0], planes[1], blue.map(encode_srgb8)];
         let lengths = [
             1, 2, 3, 31, 32, 63, 64, 65, 127, 128, 191, 192, 193, 255, 256, 287, 288,
         ];
