@@ -90,8 +90,9 @@ fn an_hour_of_simulated_use() {
                 errors.push(format!("{addr}: {m:?}"));
             }
         }
-        if step.is_multiple_of(100) {
-            rss_samples.push((step / 10, d.rss_kib()));
+        // Steps are simulated seconds.
+        if step.is_multiple_of(60) {
+            rss_samples.push((step / 60, d.rss_kib()));
         }
         if let Some(wait) = due.checked_duration_since(Instant::now()) {
             std::thread::sleep(wait);
