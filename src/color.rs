@@ -534,13 +534,13 @@ mod x86 {
                 // bytes[j]: output bytes 64j..64j + 64 (those from n on are never stored);
                 // pixels 0..64 make bytes 0..192, pixels 64..96 bytes 192..288.
                 let mut bytes = [_mm512_setzero_si512(); 6];
-                let blue = self.codes(blue);
+                let blue_codes = self.codes(blue);
                 for (half, (px, load)) in [(0, !0u64), (64, 0xFFFF_FFFF)].into_iter().enumerate() {
                     // Loads written out: `.map` with a closure is not reliably inlined
                     // here, and a call per candidate spilled the vectors (12% slower).
                     let r = _mm512_maskz_loadu_epi8(load, planes[0].as_ptr().add(px).cast());
                     let g = _mm512_maskz_loadu_epi8(load, planes[1].as_ptr().add(px).cast());
-                    let b = blue[half];
+                    let b = blue_codes[half];
                     // One single-table permute per channel, each filling its lanes: on
                     // this Sapphire Rapids a two-table permute takes two cycles of port 5,
                     // a single one one, so three cost less than two (renders 1-2% faster).
