@@ -63,11 +63,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .with_context(|| format!("{}: cannot load", args.scene.display()))?;
     let objective = objective(&args.scene)?;
 
-    // Compositor rows, to be set against the run's bound once it is known.
+    // Compositor rows, to be set against the run's bound once it is known. Every kernel
+    // this CPU runs, the dispatched one last: its thumbnail row is the one with a target
+    // (what a generate renders), its linear-float row is for comparison.
     let mut compositor_rows = Vec::new();
     for (name, stage) in [("44", &demo), ("267", &big)] {
-        // Every kernel this CPU runs, the dispatched one last: its thumbnail row is the one
-        // with a target (what a generate renders), its linear-float row is for comparison.
         let others = Kernel::ALL
             .into_iter()
             .filter(|k| k.supported() && *k != kernel);
@@ -76,9 +76,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .map(|k| (k, Product::Thumbnails))
             .chain([(kernel, Product::Thumbnails), (kernel, Product::Linear)]);
         for (k, product) in runs {
-            // Sampled next to each row as well, so a quiet spell anywhere in the run counts.
-            bound = bound.max(flop_bound(kernel));
-            let rates = compositor(stage, k, product, reps);
             let name = format!(
                 "compositor [{k:?}], {name} lights, {}x{}, 100 {}",
                 stage.thumbs.width,
@@ -86,9 +83,27 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 product.describe()
             );
             let target = (k == kernel && product == Product::Thumbnails).then_some(0.6);
-            compositor_rows.push((name, rates, target));
+            compositor_rows.push((name, Compositor::new(stage, k, product), target));
         }
     }
+    // One render of each row a round, each after an FMA loop: a row's renders and the
+    // bound's loops are spread over the same seconds, so a quiet spell of the host reaches
+    // both alike.
+    let mut out = Outputs::default();
+    for (_, row, _) in &mut compositor_rows {
+        row.render(&mut out); // warm-up: page faults, panels
+    }
+    for _ in 0..reps {
+        for (_, row, _) in &mut compositor_rows {
+            bound = bound.max(fma_rate(kernel));
+            row.sample(&mut out);
+        }
+    }
+    drop(out);
+    let compositor_rows: Vec<_> = compositor_rows
+        .into_iter()
+        .map(|(name, mut row, target)| (name, row.rates(), target))
+        .collect();
     let mut rows = Vec::new();
     for (name, stage, target) in [("44", &demo, 15.0), ("267", &big, 40.0)] {
         let (ms, cpu_ms) = generate_ms(stage, &objective, reps * 2, Duration::ZERO);
@@ -142,14 +157,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     bound = bound.max(flop_bound(kernel));
     let compositor_rows = compositor_rows
         .into_iter()
-        .map(|(name, rates, target)| Row {
+        .map(|(name, (best, median), target)| Row {
             name,
-            value: rates.best / 1e9,
+            value: best / 1e9,
             unit: "GFLOP/s",
-            ratio: rates.best / bound,
+            ratio: best / bound,
             target,
             more: true,
-            note: format!("median {:.2}", rates.median / bound),
+            note: format!("median {:.2}", median / bound),
         });
     let rows: Vec<Row> = compositor_rows.chain(rows).collect();
     println!(
@@ -180,10 +195,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         println!("{}", line.trim_end());
     }
     println!(
-        "(ratio: compositor rows, the fastest of {reps} renders to the FLOP bound (the fastest \
-         FMA loop of the run, sampled at the start, before each compositor row and at the end): \
-         both best cases, as contention on a shared host only slows either; the median \
-         render's ratio beside them. The others to their limit)"
+        "(ratio: compositor rows, the fastest of {reps} renders to the FLOP bound, the fastest \
+         FMA loop of the run: both best cases, as contention on a shared host only slows \
+         either, taken over the same seconds (the renders one a round, each after an FMA \
+         loop, plus loops at the start and the end); the median render's ratio beside them. \
+         The others to their limit)"
     );
     println!("\n(the synthetic scene: {written} EXR files, {load_s:.2} s to load)");
     Ok(())
@@ -244,17 +260,18 @@ fn rss_bytes() -> usize {
         .map_or(0, |kb| kb * 1024)
 }
 
-/// Best of three: floating-point operations per second of independent FMA chains on every
-/// rayon thread at the kernel's vector width.
+/// Best of three FMA loops: the bound at the start and the end of the run.
 fn flop_bound(kernel: Kernel) -> f64 {
+    (0..3).map(|_| fma_rate(kernel)).fold(0.0, f64::max)
+}
+
+/// Floating-point operations per second of independent FMA chains on every rayon thread
+/// at the kernel's vector width (about 35 ms).
+fn fma_rate(kernel: Kernel) -> f64 {
     const ITERS: u64 = 20_000_000;
-    (0..3)
-        .map(|_| {
-            let started = Instant::now();
-            let flops: u64 = rayon::broadcast(|_| fma_loop(kernel, ITERS)).iter().sum();
-            flops as f64 / started.elapsed().as_secs_f64()
-        })
-        .fold(0.0, f64::max)
+    let started = Instant::now();
+    let flops: u64 = rayon::broadcast(|_| fma_loop(kernel, ITERS)).iter().sum();
+    flops as f64 / started.elapsed().as_secs_f64()
 }
 
 /// Runs `iters` rounds of 12 independent FMA chains; returns the flops done.
@@ -340,55 +357,85 @@ impl Product {
     }
 }
 
-/// FLOP rates of renders: the fastest, the measure of what the code can do on a shared
-/// host, and the median.
-struct Rates {
-    best: f64,
-    median: f64,
+/// Output buffers, shared by the compositor rows: 100 thumbnails or linear images.
+#[derive(Default)]
+struct Outputs {
+    bytes: Vec<Vec<u8>>,
+    floats: Vec<Vec<f32>>,
 }
 
-/// FLOP rates of 100 random candidates rendered to `product`, `reps` times.
-fn compositor(stage: &Stage, kernel: Kernel, product: Product, reps: usize) -> Rates {
-    let basis = &stage.thumbs;
-    let mut rng = Rng::seed_from_u64(7);
-    let looks: Vec<Look> = (0..100)
-        .map(|_| Look {
-            levels: (0..basis.lights)
-                .map(|_| Level {
-                    intensity: rng.random(),
-                    color: [rng.random(), rng.random(), rng.random()],
-                })
-                .collect(),
-        })
-        .collect();
-    let refs: Vec<&Look> = looks.iter().collect();
-    let w = weights(&refs, stage.gain);
-    let len = basis.pixels() * 3;
-    let (mut bytes, mut floats) = (Vec::new(), Vec::new());
-    let mut render = || match product {
-        Product::Thumbnails => {
-            bytes.resize_with(looks.len(), || vec![0u8; len]);
-            composite_srgb8(kernel, basis, &w, &mut bytes);
+/// One compositor row: 100 random candidates of a stage, rendered by one kernel to one
+/// product, and the times of its renders.
+struct Compositor<'a> {
+    stage: &'a Stage,
+    kernel: Kernel,
+    product: Product,
+    weights: Vec<Vec<[f32; 3]>>,
+    times: Vec<f64>,
+}
+
+impl<'a> Compositor<'a> {
+    fn new(stage: &'a Stage, kernel: Kernel, product: Product) -> Self {
+        let lights = stage.thumbs.lights;
+        let mut rng = Rng::seed_from_u64(7);
+        let looks: Vec<Look> = (0..100)
+            .map(|_| Look {
+                levels: (0..lights)
+                    .map(|_| Level {
+                        intensity: rng.random(),
+                        color: [rng.random(), rng.random(), rng.random()],
+                    })
+                    .collect(),
+            })
+            .collect();
+        let refs: Vec<&Look> = looks.iter().collect();
+        Compositor {
+            stage,
+            kernel,
+            product,
+            weights: weights(&refs, stage.gain),
+            times: Vec::new(),
         }
-        Product::Linear => {
-            floats.resize_with(looks.len(), || vec![0f32; len]);
-            composite_clamped(kernel, basis, &w, &mut floats);
+    }
+
+    fn render(&self, out: &mut Outputs) {
+        let basis = &self.stage.thumbs;
+        let len = basis.pixels() * 3;
+        match self.product {
+            Product::Thumbnails => {
+                fit(&mut out.bytes, self.weights.len(), len);
+                composite_srgb8(self.kernel, basis, &self.weights, &mut out.bytes);
+            }
+            Product::Linear => {
+                fit(&mut out.floats, self.weights.len(), len);
+                composite_clamped(self.kernel, basis, &self.weights, &mut out.floats);
+            }
         }
-    };
-    render(); // warm-up: page faults, panels
-    let flops = 2.0 * 3.0 * (basis.lights * basis.pixels() * looks.len()) as f64;
-    let mut times: Vec<f64> = (0..reps)
-        .map(|_| {
-            let started = Instant::now();
-            render();
-            started.elapsed().as_secs_f64()
-        })
-        .collect();
-    // median() sorts the times, so the fastest is then the first.
-    let median = median(&mut times);
-    Rates {
-        best: flops / times[0],
-        median: flops / median,
+    }
+
+    /// Times one render.
+    fn sample(&mut self, out: &mut Outputs) {
+        let started = Instant::now();
+        self.render(out);
+        self.times.push(started.elapsed().as_secs_f64());
+    }
+
+    /// FLOP rates of the fastest render, the measure of what the code can do on a shared
+    /// host, and of the median one.
+    fn rates(&mut self) -> (f64, f64) {
+        let basis = &self.stage.thumbs;
+        let flops = 2.0 * 3.0 * (basis.lights * basis.pixels() * self.weights.len()) as f64;
+        // median() sorts the times, so the fastest is then the first.
+        let median = median(&mut self.times);
+        (flops / self.times[0], flops / median)
+    }
+}
+
+/// Makes `bufs` `n` buffers of `len`: rows of the same size share them as they are.
+fn fit<T: Default + Clone>(bufs: &mut Vec<Vec<T>>, n: usize, len: usize) {
+    bufs.resize_with(n, Vec::new);
+    for b in bufs {
+        b.resize(len, T::default());
     }
 }
 
