@@ -4,7 +4,7 @@
 use std::path::Path;
 
 use crate::basis::{self, BasisImages, Precision};
-use crate::gallery::{Generation, PROXY_WIDTH};
+use crate::gallery::{Generation, PROXY_WIDTH, Size};
 use crate::look::Look;
 use crate::objective::Objective;
 use crate::render::{exposure_gain, render_srgb8};
@@ -82,8 +82,13 @@ impl Stage {
     }
 
     /// Samples and clusters candidates for the objectives from `base`, and renders the
-    /// representatives' thumbnails (what a user sees first).
-    pub fn generate(&self, request: &GenerateRequest, rng: &mut impl rand::Rng) -> Generation {
+    /// representatives' thumbnails (what a user sees first), while the last candidates are
+    /// still being decided.
+    pub fn generate(
+        &self,
+        request: &GenerateRequest,
+        rng: &mut (impl rand::Rng + Send),
+    ) -> Generation {
         let targets: Vec<Target> = request.objectives.iter().map(|o| self.target(o)).collect();
         let plan = Plan::new(
             &self.rig,
@@ -92,21 +97,20 @@ impl Stage {
             request.base,
             request.spread,
         );
-        let mut generation = crate::gallery::generate(
+        let size = Size {
+            count: request.count,
+            clusters: request.clusters,
+        };
+        let (mut generation, thumbnails) = crate::gallery::generate(
             &plan,
             request.base,
             &self.proxy,
             self.gain,
-            request.count,
-            request.clusters,
+            size,
             rng,
+            |reps| self.thumbnails(reps),
         );
-        let reps: Vec<&Look> = generation
-            .entries
-            .iter()
-            .map(|e| &generation.candidates[e[0]])
-            .collect();
-        generation.thumbnails = self.thumbnails(&reps);
+        generation.thumbnails = thumbnails;
         generation
     }
 
