@@ -270,7 +270,8 @@ pub fn generate<T: Send>(
         batch: Batch::default(),
         rng,
     };
-    while drawing.clustering.entries.len() < size.clusters && drawing.decide_next() {}
+    let clusters = drawing.clustering.clusters;
+    while drawing.clustering.entries.len() < clusters && drawing.decide_next() {}
     let chosen: Vec<Look> = drawing
         .clustering
         .entries

@@ -156,9 +156,10 @@ fn a_gallery_of_identical_candidates_runs_out_of_draws_and_says_so() {
 #[test]
 fn thumbnails_rendered_beside_the_drawing_are_the_final_representatives() {
     // The representatives' thumbnails start as soon as every entry exists; with more
-    // entries allowed than candidates (the last case) they are rendered at the end.
+    // entries allowed than candidates they are rendered at the end, and a gallery asked for
+    // no entries has one.
     let st = stage("overlap", 10);
-    for (seed, count, clusters) in [(7, 60, 12), (8, 40, 3), (9, 10, 60)] {
+    for (seed, count, clusters) in [(7, 60, 12), (8, 40, 3), (9, 10, 60), (10, 20, 0)] {
         let g = generate(&st, seed, count, clusters);
         let reps: Vec<&Look> = g.entries.iter().map(|e| &g.candidates[e[0]]).collect();
         assert_eq!(g.thumbnails.len(), g.entries.len());
