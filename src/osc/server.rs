@@ -249,8 +249,7 @@ impl Server {
             tasks: Vec::new(),
         };
         if let Some(addr) = listen_addr("osc.udp", &config.udp)? {
-            let socket = std::net::UdpSocket::bind(addr)
-                .and_then(|s| s.set_nonblocking(true).map(|()| s))
+            let socket = bind_udp(addr)
                 .and_then(UdpSocket::from_std)
                 .map_err(|e| format!("osc.udp {addr}: {}", plain(&e)))?;
             let socket = Arc::new(socket);
@@ -463,6 +462,39 @@ type Backlogs = Arc<Mutex<HashMap<SocketAddr, (VecDeque<Vec<u8>>, usize)>>>;
 
 /// Receives datagrams and hands them to one worker per sender: a sender whose messages wait
 /// on the disk (saves) or flood in delays only itself, never a well-behaved client.
+/// Datagrams the kernel is asked to hold for the OSC socket. At 20,000 small datagrams a
+/// second (a flood, or every fader of several tablets at once) its default of 208 KiB is
+/// about 10 ms of them, so any stall of the receiving task longer than that (a busy or
+/// shared host) drops datagrams from every sender alike, a console's included. 4 MiB is
+/// about 200 ms. The kernel caps it at `net.core.rmem_max`.
+const UDP_RECV_BUFFER: usize = 4 << 20;
+
+/// The OSC UDP socket, non-blocking, with the receive buffer [`UDP_RECV_BUFFER`] asks for
+/// (or the most the kernel allows, said in the log).
+fn bind_udp(addr: SocketAddr) -> std::io::Result<std::net::UdpSocket> {
+    let socket = std::net::UdpSocket::bind(addr)?;
+    socket.set_nonblocking(true)?;
+    let sock = socket2::SockRef::from(&socket);
+    // Linux reports twice what it granted (its bookkeeping share).
+    match sock
+        .set_recv_buffer_size(UDP_RECV_BUFFER)
+        .and_then(|()| sock.recv_buffer_size())
+    {
+        Ok(got) if got / 2 < UDP_RECV_BUFFER => info!(
+            "OSC over UDP: the kernel holds {} KiB of waiting datagrams, not the {} KiB asked \
+             for; raise net.core.rmem_max to ride out longer bursts",
+            got / 2 / 1024,
+            UDP_RECV_BUFFER / 1024
+        ),
+        Ok(_) => {}
+        Err(e) => warn!(
+            "OSC over UDP: cannot size the receive buffer: {}",
+            plain(&e)
+        ),
+    }
+    Ok(socket)
+}
+
 async fn udp_loop(sender: Sender, shared: Arc<Shared>) {
     let socket = sender.socket.clone();
     let mut buf = vec![0u8; 65536];
@@ -802,6 +834,21 @@ mod tests {
         assert_eq!(t.hit(), None);
         t.last = t.last.and_then(|l| l.checked_sub(LOG_EVERY));
         assert_eq!(t.hit(), Some(3));
+    }
+
+    #[test]
+    fn the_udp_socket_holds_bursts() {
+        let socket = bind_udp("127.0.0.1:0".parse().unwrap()).unwrap();
+        let got = socket2::SockRef::from(&socket).recv_buffer_size().unwrap();
+        // As much as asked, or as the kernel allows; Linux reports twice what it granted.
+        let rmem_max = std::fs::read_to_string("/proc/sys/net/core/rmem_max")
+            .ok()
+            .and_then(|s| s.trim().parse::<usize>().ok())
+            .unwrap_or(UDP_RECV_BUFFER);
+        assert!(
+            got >= 2 * UDP_RECV_BUFFER.min(rmem_max),
+            "{got} bytes (rmem_max {rmem_max})"
+        );
     }
 
     #[test]
