@@ -460,8 +460,6 @@ fn transport_error(addr: String, message: String) -> OscMessage {
 /// while a worker task serves it.
 type Backlogs = Arc<Mutex<HashMap<SocketAddr, (VecDeque<Vec<u8>>, usize)>>>;
 
-/// Receives datagrams and hands them to one worker per sender: a sender whose messages wait
-/// on the disk (saves) or flood in delays only itself, never a well-behaved client.
 /// Datagrams the kernel is asked to hold for the OSC socket. At 20,000 small datagrams a
 /// second (a flood, or every fader of several tablets at once) its default of 208 KiB is
 /// about 10 ms of them, so any stall of the receiving task longer than that (a busy or
@@ -495,6 +493,8 @@ fn bind_udp(addr: SocketAddr) -> std::io::Result<std::net::UdpSocket> {
     Ok(socket)
 }
 
+/// Receives datagrams and hands them to one worker per sender: a sender whose messages wait
+/// on the disk (saves) or flood in delays only itself, never a well-behaved client.
 async fn udp_loop(sender: Sender, shared: Arc<Shared>) {
     let socket = sender.socket.clone();
     let mut buf = vec![0u8; 65536];
