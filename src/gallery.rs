@@ -322,7 +322,6 @@ struct Batch {
     looks: std::vec::IntoIter<Look>,
     labs: Vec<Vec<f32>>,
     known: Vec<Vec<f32>>,
-    next: usize,
 }
 
 impl<R: Rng> Drawing<'_, R> {
@@ -332,14 +331,14 @@ impl<R: Rng> Drawing<'_, R> {
         if self.candidates.len() >= self.count {
             return false;
         }
-        if self.batch.next == self.batch.labs.len() {
+        if self.batch.looks.len() == 0 {
             if self.draws >= self.max_draws {
                 return false;
             }
             self.draw_batch();
         }
-        let i = self.batch.next;
-        self.batch.next += 1;
+        // The look's place in its batch: how many were decided before it.
+        let i = self.batch.labs.len() - self.batch.looks.len();
         let Some(look) = self.batch.looks.next() else {
             return false;
         };
@@ -382,7 +381,6 @@ impl<R: Rng> Drawing<'_, R> {
             looks: looks.into_iter(),
             labs,
             known,
-            next: 0,
         };
     }
 }
