@@ -225,7 +225,9 @@ pub struct Generation {
     /// Thumbnails of the representatives, one per entry, so the gallery can be shown as
     /// soon as it exists (filled by [`crate::stage::Stage::generate`]; members' thumbnails
     /// are rendered on demand with [`crate::stage::Stage::thumbnails`]).
-    pub thumbnails: Vec<image::RgbImage>,
+    /// Shared and never changed once made, so a reader (the web gallery) takes them
+    /// without copying and without holding the session.
+    pub thumbnails: std::sync::Arc<[image::RgbImage]>,
 }
 
 /// Candidates are sampled and proxied in batches of at most this many; the decisions are
@@ -294,7 +296,7 @@ pub fn generate<T: Send>(
         entries: clustering.entries().to_vec(),
         threshold: clustering.threshold(),
         draws,
-        thumbnails: Vec::new(),
+        thumbnails: std::sync::Arc::new([]),
     };
     (generation, out)
 }

@@ -305,44 +305,72 @@ fn number_jpg<T: std::str::FromStr>(file: &str) -> Option<T> {
     file.strip_suffix(".jpg")?.parse().ok()
 }
 
-/// What the page shows, as JSON.
+/// What the page shows, as JSON. The session is held only to copy the few values out;
+/// the JSON is built after it is released.
 fn state(e: &Engine) -> serde_json::Value {
-    let s = e.session();
-    let mut hasher = std::collections::hash_map::DefaultHasher::new();
-    for l in &s.live.levels {
-        l.intensity.to_bits().hash(&mut hasher);
-        l.color.map(f32::to_bits).hash(&mut hasher);
-    }
-    let gallery = s.gallery.as_ref().map(|g| {
+    let (status, live, gallery, entry, objectives) = {
+        let s = e.session();
+        let mut hasher = std::collections::hash_map::DefaultHasher::new();
+        for l in &s.live.levels {
+            l.intensity.to_bits().hash(&mut hasher);
+            l.color.map(f32::to_bits).hash(&mut hasher);
+        }
+        let gallery = s.gallery.as_ref().map(|g| {
+            let sizes: Vec<usize> = g.generation.entries.iter().map(Vec::len).collect();
+            (g.serial, g.seed, sizes)
+        });
+        let objectives: Vec<(u32, String, &'static str, [f32; 4])> = s
+            .objectives
+            .iter()
+            .map(|o| {
+                let r = o.objective.region;
+                (
+                    o.id,
+                    o.objective.image.clone(),
+                    o.objective.aspects.name(),
+                    [r.x0, r.y0, r.x1, r.y1],
+                )
+            })
+            .collect();
+        (
+            e.status_text(&s),
+            hasher.finish(),
+            gallery,
+            s.entry.unwrap_or((0, 0)),
+            objectives,
+        )
+    };
+    let output = e.output_stats().map(|h| {
         json!({
-            "serial": g.serial,
-            "seed": g.seed,
-            "sizes": g.generation.entries.iter().map(Vec::len).collect::<Vec<_>>(),
+            "fps": h.tick_rate,
+            "late": h.late_ticks,
+            "send_errors": h.send_errors,
+            "destinations": h.destinations.iter().map(|(name, errors)| json!({
+                "name": name,
+                "send_errors": errors,
+            })).collect::<Vec<_>>(),
         })
     });
-    let objectives: Vec<serde_json::Value> = s
-        .objectives
-        .iter()
-        .map(|o| {
-            let r = o.objective.region;
-            json!({
-                "id": o.id,
-                "image": o.objective.image,
-                "aspects": o.objective.aspects.name(),
-                "region": [r.x0, r.y0, r.x1, r.y1],
-            })
-        })
-        .collect();
     json!({
         "scene": e.stage.scene.name,
         "aspect": e.stage.thumbs.width as f32 / e.stage.thumbs.height.max(1) as f32,
-        "status": e.status_text(&s),
+        "status": status,
+        "output": output,
         "generating": e.is_generating(),
-        "gallery": gallery,
-        "entry": s.entry.map_or(0, |(k, _)| k),
-        "member": s.entry.map_or(0, |(_, m)| m),
-        "live": format!("{:016x}", hasher.finish()),
-        "objectives": objectives,
+        "gallery": gallery.map(|(serial, seed, sizes)| json!({
+            "serial": serial,
+            "seed": seed,
+            "sizes": sizes,
+        })),
+        "entry": entry.0,
+        "member": entry.1,
+        "live": format!("{live:016x}"),
+        "objectives": objectives.into_iter().map(|(id, image, aspects, region)| json!({
+            "id": id,
+            "image": image,
+            "aspects": aspects,
+            "region": region,
+        })).collect::<Vec<_>>(),
     })
 }
 
@@ -367,10 +395,10 @@ async fn thumb(shared: &Shared, serial: u64, k: usize) -> Answer {
         Some((s, pics)) if *s == serial => Arc::clone(pics),
         _ => {
             // The representatives' thumbnails were rendered with the gallery.
-            let thumbs: Vec<image::RgbImage> = {
+            let thumbs = {
                 let s = shared.engine.session();
                 match s.gallery.as_ref() {
-                    Some(g) if g.serial == serial => g.generation.thumbnails.clone(),
+                    Some(g) if g.serial == serial => Arc::clone(&g.generation.thumbnails),
                     _ => return Answer::text(404, "that gallery was replaced by a newer one"),
                 }
             };

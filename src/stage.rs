@@ -110,7 +110,7 @@ impl Stage {
             rng,
             |reps| self.thumbnails(reps),
         );
-        generation.thumbnails = thumbnails;
+        generation.thumbnails = thumbnails.into();
         generation
     }
 

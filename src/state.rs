@@ -84,12 +84,7 @@ fn move_aside<T>(path: &Path, why: String) -> Loaded<T> {
 /// Renames a bad state file to `NAME.corrupt-<unix seconds>` beside it and logs why, so a
 /// person can inspect or restore it; returns the new path.
 pub fn keep_aside(path: &Path, why: &str) -> std::io::Result<PathBuf> {
-    let secs = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_secs());
-    let mut aside = path.as_os_str().to_owned();
-    aside.push(format!(".corrupt-{secs}"));
-    let aside = PathBuf::from(aside);
+    let aside = aside_path(path, "corrupt");
     fs::rename(path, &aside)?;
     tracing::error!(
         "{}: {why}; kept it as {} and carried on without it",
@@ -97,6 +92,25 @@ pub fn keep_aside(path: &Path, why: &str) -> std::io::Result<PathBuf> {
         aside.display()
     );
     Ok(aside)
+}
+
+/// Copies a state file that was only partly restored to `NAME.partial-<unix seconds>`
+/// beside it before the daemon's next write replaces it, so what could not be brought
+/// back (objectives, locks on groups the scene no longer has) is not lost.
+pub fn keep_copy(path: &Path) -> std::io::Result<PathBuf> {
+    let aside = aside_path(path, "partial");
+    fs::copy(path, &aside)?;
+    Ok(aside)
+}
+
+/// `NAME.<tag>-<unix seconds>` beside `path`.
+fn aside_path(path: &Path, tag: &str) -> PathBuf {
+    let secs = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    let mut aside = path.as_os_str().to_owned();
+    aside.push(format!(".{tag}-{secs}"));
+    PathBuf::from(aside)
 }
 
 #[cfg(test)]

@@ -202,9 +202,10 @@ fn an_unwritable_looks_file_refuses_the_save_and_the_show_goes_on() {
     );
     d.refused("/vo/look/save", vec![int(1), string("replaced")]);
     d.refused("/vo/look/delete", vec![int(1)]);
-    // Everything else goes on: faders, picks from looks, the wire.
+    // Everything else goes on: faders, the wire; a recall is live but says it was not kept.
     d.ok("/vo/light/1/level", vec![int(60)], "/vo/light");
-    d.ok("/vo/look/recall", vec![int(1)], "/vo/look/recalled");
+    let sentence = d.err("/vo/look/recall", vec![int(1)]);
+    assert!(sentence.contains("state not saved"), "{sentence}");
     assert_eq!(d.looks(), [(1, "kept".to_string())]);
     d.wire
         .assert_continuous_since(from, "while the state folder could not be written");
@@ -246,6 +247,8 @@ fn a_full_disk_refuses_the_save_and_the_show_goes_on() {
         vec![int(1), string("before")],
         "/vo/look/saved",
     );
+    d.add_objective("warm.png", "both");
+    d.generate();
     // Fill it: the filler write stops at ENOSPC.
     let filler = state.join("filler");
     let chunk = vec![0u8; 4096];
@@ -254,6 +257,22 @@ fn a_full_disk_refuses_the_save_and_the_show_goes_on() {
     drop(f);
     let sentence = d.refused("/vo/look/save", vec![int(2)]);
     assert!(sentence.contains("No space left"), "{sentence}");
+    // A pick goes on stage, and its reply says it was not kept.
+    let sentence = d.err("/vo/pick", vec![int(2)]);
+    assert!(
+        sentence.contains("state not saved") && sentence.contains("No space left"),
+        "{sentence}"
+    );
+    let picked = d.live();
+    let candidate = d.ok("/vo/candidate", vec![int(2)], "/vo/candidate");
+    assert!(common::daemon::same_look(
+        &picked,
+        &common::daemon::lights(&candidate.args[2..]),
+        1e-6
+    ));
+    for proto in PROTOS {
+        d.wire.wait_look(proto, &picked);
+    }
     d.ok("/vo/light/1/level", vec![int(60)], "/vo/light");
     assert_eq!(d.looks(), [(1, "before".to_string())]);
     d.wire

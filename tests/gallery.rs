@@ -163,6 +163,6 @@ fn thumbnails_rendered_beside_the_drawing_are_the_final_representatives() {
         let g = generate(&st, seed, count, clusters);
         let reps: Vec<&Look> = g.entries.iter().map(|e| &g.candidates[e[0]]).collect();
         assert_eq!(g.thumbnails.len(), g.entries.len());
-        assert!(g.thumbnails == st.thumbnails(&reps), "seed {seed}");
+        assert!(*g.thumbnails == *st.thumbnails(&reps), "seed {seed}");
     }
 }

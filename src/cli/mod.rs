@@ -3,6 +3,7 @@
 mod bench;
 mod check;
 mod gallery;
+mod logs;
 mod render;
 mod run;
 mod send;
@@ -91,6 +92,15 @@ pub fn main() -> std::process::ExitCode {
         .subcommand()
         .map(|(_, m)| m)
         .expect("clap requires a subcommand");
+    // The daemon logs what it does; the offline commands only what went wrong.
+    let level = match &cli.command {
+        Command::Run(args) => args.log_level.as_str(),
+        _ => "warn",
+    };
+    if let Err(e) = logs::init(level) {
+        eprintln!("error: {e}");
+        return std::process::ExitCode::FAILURE;
+    }
     let result = match cli.command {
         Command::Run(args) => run::run(args),
         Command::Gallery(args) => gallery::run(args, sub),

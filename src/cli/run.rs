@@ -29,29 +29,11 @@ pub struct Args {
     config: PathBuf,
     /// Log filter when RUST_LOG is not set (error, warn, info, debug, trace).
     #[arg(long, default_value = "info")]
-    log_level: String,
+    pub log_level: String,
 }
 
 /// Runs the daemon until SIGINT or SIGTERM.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
-        .or_else(|_| tracing_subscriber::EnvFilter::try_new(&args.log_level))
-        .context("--log-level: not a log filter")?;
-    // Under systemd, stderr goes to journald, which stamps each line itself: no second
-    // timestamp and no colour there; a terminal gets both.
-    let terminal = std::io::IsTerminal::is_terminal(&std::io::stderr());
-    let journal = !terminal && std::env::var_os("JOURNAL_STREAM").is_some();
-    let logs = tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_writer(std::io::stderr)
-        .with_ansi(terminal)
-        .with_target(false)
-        .compact();
-    if journal {
-        logs.without_time().init();
-    } else {
-        logs.init();
-    }
     super::start_compute_pool();
 
     let config = Config::load(&args.config).map_err(anyhow::Error::msg)?;
@@ -112,6 +94,27 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     result
 }
 
+/// Pings systemd's watchdog at half its period, but only while the DMX clock has ticked
+/// since the last ping: a stalled or dead clock (a dark stage) and a wedged runtime (OSC
+/// gone) both stop the pings, and systemd restarts the daemon.
+async fn watchdog(engine: Arc<crate::engine::Engine>, period: std::time::Duration) {
+    let mut tick = tokio::time::interval(period / 2);
+    let mut last = None;
+    loop {
+        tick.tick().await;
+        let ticks = engine.output_stats().map(|s| s.ticks);
+        if ticks.is_some() && ticks != last {
+            let _ = sd_notify::notify(&[sd_notify::NotifyState::Watchdog]);
+        } else if ticks.is_some() {
+            tracing::error!(
+                "the DMX clock has not ticked for {:?}: no watchdog ping",
+                period / 2
+            );
+        }
+        last = ticks;
+    }
+}
+
 async fn serve(config: &Config, engine: &Arc<Engine>) -> anyhow::Result<()> {
     use tokio::signal::unix::{SignalKind, signal};
     let server = Server::start(&config.osc, Arc::new(EngineHandler(Arc::clone(engine))))
@@ -129,15 +132,7 @@ async fn serve(config: &Config, engine: &Arc<Engine>) -> anyhow::Result<()> {
     }
     let _ = sd_notify::notify(&[sd_notify::NotifyState::Ready]);
     if let Some(period) = sd_notify::watchdog_enabled() {
-        // Ping at half the watchdog period from the runtime: if OSC handling wedges the
-        // runtime, systemd restarts the daemon.
-        tokio::spawn(async move {
-            let mut tick = tokio::time::interval(period / 2);
-            loop {
-                tick.tick().await;
-                let _ = sd_notify::notify(&[sd_notify::NotifyState::Watchdog]);
-            }
-        });
+        tokio::spawn(watchdog(Arc::clone(engine), period));
     }
     let mut term = signal(SignalKind::terminate()).context("cannot watch SIGTERM")?;
     let mut int = signal(SignalKind::interrupt()).context("cannot watch SIGINT")?;

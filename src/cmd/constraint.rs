@@ -67,7 +67,7 @@ impl Cmd {
                 )
             }
         };
-        e.persist(s, true);
+        e.persist(s, true)?;
         Ok(vec![reply])
     }
 }

@@ -75,8 +75,9 @@ impl Cmd {
                 })?;
                 e.show(&s, s.fade_s);
                 let feedback = e.feedback(&s);
-                e.persist(s, true);
+                let saved = e.persist(s, true);
                 e.notify(&feedback);
+                saved?;
                 let addr = if undo { "/vo/undone" } else { "/vo/redone" };
                 Ok(vec![msg(addr, vec![int(depth)])])
             }
@@ -104,8 +105,9 @@ fn pick(
     e.show(&s, s.fade_s);
     let picked = msg("/vo/picked", vec![int(k), int(m)]);
     let feedback = e.feedback(&s);
-    e.persist(s, true);
+    let saved = e.persist(s, true);
     e.notify(&[std::slice::from_ref(&picked), feedback.as_slice()].concat());
+    saved?;
     Ok(vec![picked])
 }
 

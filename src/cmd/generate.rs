@@ -53,7 +53,7 @@ impl Cmd {
                 msg("/vo/generate/seed", vec![int(seed as usize)])
             }
         };
-        e.persist(s, true);
+        e.persist(s, true)?;
         Ok(vec![reply])
     }
 }

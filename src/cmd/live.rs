@@ -141,8 +141,9 @@ impl Cmd {
         if push {
             feedback.insert(0, reply.clone());
         }
-        e.persist(s, wait);
+        let saved = e.persist(s, wait);
         e.notify(&feedback);
+        saved?;
         Ok(vec![reply])
     }
 }

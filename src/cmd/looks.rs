@@ -43,42 +43,35 @@ impl Cmd {
 
     pub fn apply(self, e: &Arc<Engine>) -> Result<Vec<OscMessage>, String> {
         let scene = &e.stage.scene;
-        let mut s = e.session();
         match self {
             Cmd::Save { n, label } => {
                 let label = label.unwrap_or_else(|| format!("Look {n}"));
-                let file = LookFile::from_look(scene, &s.live, &label);
-                let previous = s.looks.insert(n, file);
-                if let Err(err) = e.save_looks(&s) {
-                    // Nothing changes when the save fails.
-                    match previous {
-                        Some(p) => s.looks.insert(n, p),
-                        None => s.looks.remove(&n),
-                    };
-                    return Err(format!("look {n} was not saved: {err}"));
-                }
+                e.change_looks(|s, looks| {
+                    looks.insert(n, LookFile::from_look(scene, &s.live, &label));
+                    Ok(())
+                })
+                .map_err(|err| format!("look {n} was not saved: {err}"))?;
                 Ok(vec![msg("/vo/look/saved", vec![int(n as usize)])])
             }
             Cmd::Recall(n) => {
+                let mut s = e.session();
                 let file = s.looks.get(&n).ok_or_else(|| missing(n))?;
                 let look = file.to_look(scene)?;
                 s.set_base(look, Change::Step);
                 s.entry = None;
                 e.show(&s, s.fade_s);
                 let feedback = e.feedback(&s);
-                e.persist(s, true);
+                let saved = e.persist(s, true);
                 e.notify(&feedback);
+                saved?;
                 Ok(vec![msg("/vo/look/recalled", vec![int(n as usize)])])
             }
             Cmd::Delete(n) => {
-                let previous = s.looks.remove(&n).ok_or_else(|| missing(n))?;
-                if let Err(err) = e.save_looks(&s) {
-                    s.looks.insert(n, previous);
-                    return Err(format!("look {n} was not deleted: {err}"));
-                }
+                e.change_looks(|_, looks| looks.remove(&n).map(drop).ok_or_else(|| missing(n)))
+                    .map_err(|err| format!("look {n} was not deleted: {err}"))?;
                 Ok(vec![msg("/vo/look/deleted", vec![int(n as usize)])])
             }
-            Cmd::List => Ok(list(&s)),
+            Cmd::List => Ok(list(&e.session())),
         }
     }
 }

@@ -12,6 +12,7 @@ mod live;
 mod looks;
 mod objective;
 mod status;
+mod test_hook;
 
 use std::sync::Arc;
 
@@ -33,6 +34,7 @@ enum Command {
     Live(live::Cmd),
     Looks(looks::Cmd),
     Status(status::Cmd),
+    TestHook(test_hook::Cmd),
 }
 
 impl Command {
@@ -58,6 +60,9 @@ impl Command {
         if let Some(c) = status::Cmd::parse(req)? {
             return Ok(Command::Status(c));
         }
+        if let Some(c) = test_hook::Cmd::parse(req)? {
+            return Ok(Command::TestHook(c));
+        }
         Err(format!(
             "unknown address {}: the addresses are listed in the README's OSC reference",
             req.path()
@@ -74,6 +79,7 @@ impl Command {
             Command::Live(_) => "live",
             Command::Looks(_) => "looks",
             Command::Status(_) => "status",
+            Command::TestHook(_) => "test",
         }
     }
 
@@ -86,6 +92,7 @@ impl Command {
             Command::Live(c) => c.apply(e),
             Command::Looks(c) => c.apply(e),
             Command::Status(c) => c.apply(e, peer),
+            Command::TestHook(c) => c.apply(e),
         }
     }
 }

@@ -103,7 +103,7 @@ impl Cmd {
                 let mut s = e.session();
                 let (i, id) = find(&s, id)?;
                 s.objectives[i].objective.aspects = aspects;
-                e.persist(s, true);
+                e.persist(s, true)?;
                 Ok(vec![msg(
                     "/vo/objective/aspects",
                     vec![int(id as usize), text(aspects.name())],
@@ -120,7 +120,7 @@ impl Cmd {
                 let mut s = e.session();
                 let (i, id) = find(&s, id)?;
                 s.objectives[i].objective.region = region;
-                e.persist(s, true);
+                e.persist(s, true)?;
                 Ok(vec![msg(
                     "/vo/objective/region",
                     vec![
@@ -148,7 +148,7 @@ impl Cmd {
                 })?;
                 c.color = rgb;
                 let reply = palette(id, &s.objectives[i].objective);
-                e.persist(s, true);
+                e.persist(s, true)?;
                 Ok(vec![reply])
             }
             Cmd::Remove { id } => {
@@ -156,8 +156,9 @@ impl Cmd {
                 let (i, id) = find(&s, id)?;
                 s.objectives.remove(i);
                 let feedback = e.feedback(&s);
-                e.persist(s, true);
+                let saved = e.persist(s, true);
                 e.notify(&feedback);
+                saved?;
                 Ok(vec![msg("/vo/objective/removed", vec![int(id as usize)])])
             }
             Cmd::Clear => {
@@ -165,8 +166,9 @@ impl Cmd {
                 let n = s.objectives.len();
                 s.objectives.clear();
                 let feedback = e.feedback(&s);
-                e.persist(s, true);
+                let saved = e.persist(s, true);
                 e.notify(&feedback);
+                saved?;
                 Ok(vec![msg("/vo/objective/cleared", vec![int(n)])])
             }
             Cmd::List => Ok(list(&e.session())),

@@ -9,6 +9,7 @@
 pub mod persist;
 pub mod session;
 
+use std::collections::BTreeMap;
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
@@ -21,9 +22,10 @@ use rosc::{OscMessage, OscType};
 use crate::cmd;
 use crate::config::Config;
 use crate::look::Look;
+use crate::look::LookFile;
 use crate::objective::{Objective, decode_reference};
 use crate::osc::{Handler, Peer, Sender};
-use crate::output::Output;
+use crate::output::{Output, OutputStats};
 use crate::sampler::Spread;
 use crate::stage::{GenerateRequest, Stage};
 use persist::{Files, Snapshot, Writer};
@@ -62,10 +64,20 @@ pub struct Engine {
     lit_span: AtomicUsize,
     files: Files,
     writer: Writer,
+    /// Held across a write of `looks.json`, so saves and deletes reach the disk in the
+    /// order they change the looks, without holding the session during the fsync.
+    looks_io: Mutex<()>,
     subscribers: Mutex<Vec<Subscriber>>,
     push: OnceLock<Sender>,
     eos: crate::eos::EosConfig,
+    /// `VISOBJD_TEST_HOOKS` was set: `/vo/test/...` may inject faults.
+    test_hooks: bool,
+    /// Test hook: the next generate panics.
+    panic_generate: AtomicBool,
 }
+
+/// Set in the environment, enables the `/vo/test/...` fault hooks (never in production).
+pub const TEST_HOOKS: &str = "VISOBJD_TEST_HOOKS";
 
 impl Engine {
     /// An engine over a loaded stage, restored from `state_dir`, driving `output`.
@@ -95,9 +107,12 @@ impl Engine {
             lit_span: AtomicUsize::new(0),
             writer: Writer::start(files.clone())?,
             files,
+            looks_io: Mutex::new(()),
             subscribers: Mutex::new(Vec::new()),
             push: OnceLock::new(),
             eos: config.eos.clone(),
+            test_hooks: std::env::var_os(TEST_HOOKS).is_some(),
+            panic_generate: AtomicBool::new(false),
             stage,
         })
     }
@@ -133,29 +148,72 @@ impl Engine {
         });
     }
 
-    /// Persists the session. With `wait`, returns only once it is on disk (bounded), for
-    /// discrete changes a restart must not lose; call it with the session unlocked.
-    pub fn persist(&self, s: MutexGuard<'_, Session>, wait: bool) {
+    /// Persists the session, releasing its lock. With `wait`, returns only once it is on
+    /// disk (bounded), for discrete changes a restart must not lose, and an `Err` with the
+    /// sentence for `/vo/error` when the write failed: the change stays live (the stage is
+    /// never taken back for a full disk), but it would not survive a restart.
+    pub fn persist(&self, s: MutexGuard<'_, Session>, wait: bool) -> Result<(), String> {
         let ticket = self.writer.save(Snapshot::of(&self.stage.scene, &s));
         drop(s);
-        if wait {
-            self.writer.wait(ticket);
+        if !wait {
+            return Ok(());
         }
+        self.writer.wait(ticket).map_err(|e| {
+            format!(
+                "state not saved: {e}; the change is live, but a restart would not bring it back"
+            )
+        })
     }
 
-    /// Writes saved looks now; the error is a sentence for `/vo/error`.
-    pub fn save_looks(&self, s: &Session) -> Result<(), String> {
+    /// Changes the saved looks durably: `change` edits a copy (seeing the session), the
+    /// copy is written with the session unlocked, and only a written copy replaces the
+    /// session's. A failed write changes nothing; the error is a sentence for `/vo/error`.
+    pub fn change_looks<T>(
+        &self,
+        change: impl FnOnce(&Session, &mut BTreeMap<u32, LookFile>) -> Result<T, String>,
+    ) -> Result<T, String> {
+        let _in_order = self.looks_io.lock().unwrap_or_else(|p| p.into_inner());
+        let (out, looks) = {
+            let s = self.session();
+            let mut looks = s.looks.clone();
+            (change(&s, &mut looks)?, looks)
+        };
         self.files
-            .save_looks(&s.looks)
-            .map_err(|e| format!("cannot write the saved looks in the state folder: {e}"))
+            .save_looks(&looks)
+            .map_err(|e| format!("cannot write the saved looks in the state folder: {e}"))?;
+        self.session().looks = looks;
+        Ok(out)
     }
 
-    /// Stops the output: three Stream_Terminated packets per sACN universe.
+    /// Stops the output (three Stream_Terminated packets per sACN universe) and writes the
+    /// state still queued.
     pub fn shutdown(&self) {
         let out = self.output.lock().unwrap_or_else(|p| p.into_inner()).take();
         if let Some(out) = out {
             out.shutdown();
         }
+        self.writer.finish();
+    }
+
+    /// The output's counters (`None` once it stopped).
+    pub fn output_stats(&self) -> Option<OutputStats> {
+        let mut stats = None;
+        self.with_output(|o| stats = Some(o.stats()));
+        stats
+    }
+
+    /// Fault injection for tests; refused unless [`TEST_HOOKS`] is set.
+    pub fn test_hook(&self, hook: TestHook) -> Result<(), String> {
+        if !self.test_hooks {
+            return Err(format!("test hooks are off ({TEST_HOOKS} is not set)"));
+        }
+        match hook {
+            TestHook::StallDmx(on) => self.with_output(|o| o.stall(on)),
+            TestHook::PanicDmx => self.with_output(Output::panic_clock),
+            TestHook::PanicGenerate => self.panic_generate.store(true, Ordering::SeqCst),
+            TestHook::SlowDisk(ms) => self.writer.slow_down(ms),
+        }
+        Ok(())
     }
 
     /// The references folder (objective images are read from it, and only from it).
@@ -196,11 +254,11 @@ impl Engine {
             let _one_at_a_time = self.reading.lock().unwrap_or_else(|p| p.into_inner());
             self.load_reference(image, aspects)?
         };
-        Ok(self.install_objective(objective))
+        self.install_objective(objective)
     }
 
     /// Adds a read objective to the session (durably); its `/vo/objective/added`.
-    fn install_objective(&self, objective: Objective) -> OscMessage {
+    fn install_objective(&self, objective: Objective) -> Result<OscMessage, String> {
         let mut s = self.session();
         let id = s.next_id;
         s.next_id += 1;
@@ -208,9 +266,10 @@ impl Engine {
         let aspects = objective.aspects;
         s.objectives.push(session::Entry { id, objective });
         let feedback = self.feedback(&s);
-        self.persist(s, true);
+        let saved = self.persist(s, true);
         self.notify(&feedback);
-        msg(
+        saved?;
+        Ok(msg(
             "/vo/objective/added",
             vec![
                 OscType::Int(id as i32),
@@ -219,7 +278,7 @@ impl Engine {
                 OscType::Float(st.key_l),
                 OscType::Float(st.bright),
             ],
-        )
+        ))
     }
 
     /// Starts a generate on its own thread; the reply (`/vo/generated`) goes to `peer`
@@ -252,19 +311,35 @@ impl Engine {
         let spawned = std::thread::Builder::new()
             .name("generate".into())
             .spawn(move || {
+                // Whatever happens below, the next generate is allowed.
+                let _running = Running(&engine.generating);
                 engine.notify(&started_msgs);
                 let started = Instant::now();
-                let generation = engine.stage.generate(
-                    &GenerateRequest {
-                        objectives: &objectives,
-                        constraints: &constraints,
-                        base: &base,
-                        spread: engine.spread,
-                        count,
-                        clusters,
-                    },
-                    &mut rand::rngs::Xoshiro256PlusPlus::seed_from_u64(seed),
-                );
+                let drawn = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                    if engine.panic_generate.swap(false, Ordering::SeqCst) {
+                        panic!("test hook: the generate panics");
+                    }
+                    engine.stage.generate(
+                        &GenerateRequest {
+                            objectives: &objectives,
+                            constraints: &constraints,
+                            base: &base,
+                            spread: engine.spread,
+                            count,
+                            clusters,
+                        },
+                        &mut rand::rngs::Xoshiro256PlusPlus::seed_from_u64(seed),
+                    )
+                }));
+                let Ok(generation) = drawn else {
+                    tracing::error!("generate {serial} (seed {seed}) failed: a panic, logged above");
+                    let e = error(
+                        "/vo/generate",
+                        &format!("the generate failed (an internal error, logged with seed {seed}); the gallery is unchanged, generate again"),
+                    );
+                    peer.reply(std::slice::from_ref(&e));
+                    return;
+                };
                 let ms = started.elapsed().as_secs_f32() * 1000.0;
                 if generation.exhausted {
                     tracing::warn!(
@@ -340,26 +415,37 @@ impl Engine {
         self.generating.load(Ordering::SeqCst)
     }
 
-    /// `/vo/status` for `s`.
+    /// `/vo/status` for `s`: the session, then the output's health (frames per second,
+    /// late frames, failed sends, then a label and failed sends per destination).
     pub fn status(&self, s: &Session) -> OscMessage {
         let (candidates, clusters) = s
             .gallery
             .as_ref()
             .map_or((0, 0), |g| (g.generation.candidates.len(), g.len()));
-        msg(
-            "/vo/status",
-            vec![
-                OscType::String(self.stage.scene.name.clone()),
-                OscType::Int(self.stage.scene.lights.len() as i32),
-                OscType::Int(s.objectives.len() as i32),
-                OscType::Int(candidates as i32),
-                OscType::Int(clusters as i32),
-                OscType::Int(s.entry.map_or(0, |(k, _)| k as i32)),
-                OscType::Float(s.fade_s),
-                OscType::Int(i32::from(s.blackout)),
-                OscType::Float(s.master),
-            ],
-        )
+        let health = self.output_stats();
+        let mut args = vec![
+            OscType::String(self.stage.scene.name.clone()),
+            OscType::Int(self.stage.scene.lights.len() as i32),
+            OscType::Int(s.objectives.len() as i32),
+            OscType::Int(candidates as i32),
+            OscType::Int(clusters as i32),
+            OscType::Int(s.entry.map_or(0, |(k, _)| k as i32)),
+            OscType::Float(s.fade_s),
+            OscType::Int(i32::from(s.blackout)),
+            OscType::Float(s.master),
+        ];
+        if let Some(h) = health {
+            args.extend([
+                OscType::Float(h.tick_rate),
+                OscType::Int(h.late_ticks.min(i32::MAX as u64) as i32),
+                OscType::Int(h.send_errors.min(i32::MAX as u64) as i32),
+            ]);
+            for (name, errors) in h.destinations {
+                args.push(OscType::String(name));
+                args.push(OscType::Int(errors.min(i32::MAX as u64) as i32));
+            }
+        }
+        msg("/vo/status", args)
     }
 
     /// What a tablet shows of `s`, pushed to subscribers on every change so buttons and
@@ -408,6 +494,9 @@ impl Engine {
         parts.push(format!("fade {} s", s.fade_s));
         if s.master < 1.0 {
             parts.push(format!("master {:.0}%", s.master * 100.0));
+        }
+        if let Some(h) = self.output_stats() {
+            parts.push(h.summary());
         }
         parts.join(", ")
     }
@@ -460,6 +549,29 @@ impl Engine {
         for s in subs.iter_mut().filter(|s| s.from == peer.addr().ip()) {
             s.last_seen = Instant::now();
         }
+    }
+}
+
+/// A fault a test injects (see [`Engine::test_hook`]).
+#[derive(Debug, Clone, Copy)]
+pub enum TestHook {
+    /// Holds the DMX clock still (on) or lets it go (off).
+    StallDmx(bool),
+    /// Makes the DMX clock thread panic.
+    PanicDmx,
+    /// Makes the next generate panic.
+    PanicGenerate,
+    /// Makes every state write wait this many milliseconds first.
+    SlowDisk(u64),
+}
+
+/// Clears the "generating" flag when dropped, so a generate that panics never blocks the
+/// next one.
+struct Running<'a>(&'a AtomicBool);
+
+impl Drop for Running<'_> {
+    fn drop(&mut self) {
+        self.0.store(false, Ordering::SeqCst);
     }
 }
 

@@ -9,6 +9,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex, mpsc};
+use std::thread::JoinHandle;
 use std::time::Duration;
 
 use serde::{Deserialize, Serialize};
@@ -88,7 +89,8 @@ impl Files {
         self.dir.join("session.json")
     }
 
-    /// Writes saved looks now (the caller answers only once they are on disk).
+    /// Writes saved looks now (the caller answers only once they are on disk; call it with
+    /// the session unlocked).
     pub fn save_looks(&self, looks: &BTreeMap<u32, LookFile>) -> std::io::Result<()> {
         save_json(
             &self.looks(),
@@ -99,7 +101,9 @@ impl Files {
     }
 
     /// Restores what the files hold into a fresh session; anything unreadable is kept
-    /// aside (logged) and the rest still restored.
+    /// aside (logged) and the rest still restored. What a readable file holds but this
+    /// scene cannot take (a lock on a group it no longer has, an objective that does not
+    /// parse) is logged item by item, and the file is copied aside before it is rewritten.
     pub fn restore(&self, scene: &Scene, session: &mut Session) {
         if let Loaded::Ok(live) = load_json::<LiveFile>(&self.live()) {
             match (live.live.to_look(scene), live.base.to_look(scene)) {
@@ -110,7 +114,7 @@ impl Files {
                     session.blackout = live.blackout;
                 }
                 (Err(e), _) | (_, Err(e)) => {
-                    tracing::error!("{}: does not fit the scene: {e}", self.live().display())
+                    partly_restored(&self.live(), &[format!("does not fit the scene: {e}")])
                 }
             }
         }
@@ -118,8 +122,26 @@ impl Files {
             session.looks = looks.looks;
         }
         if let Loaded::Ok(file) = load_json::<SessionFile>(&self.session()) {
-            apply_session(scene, &file, session);
+            partly_restored(&self.session(), &apply_session(scene, &file, session));
         }
+    }
+}
+
+/// Logs what `path` held that was not restored and keeps a copy of it aside.
+fn partly_restored(path: &Path, lost: &[String]) {
+    if lost.is_empty() {
+        return;
+    }
+    for what in lost {
+        tracing::error!("{}: not restored: {what}", path.display());
+    }
+    match crate::state::keep_copy(path) {
+        Ok(aside) => tracing::error!(
+            "{}: kept the file as it was in {}",
+            path.display(),
+            aside.display()
+        ),
+        Err(e) => tracing::error!("{}: could not keep a copy aside: {e}", path.display()),
     }
 }
 
@@ -131,33 +153,48 @@ pub fn restore_live(files: &Files) -> Option<LiveFile> {
     }
 }
 
-fn apply_session(scene: &Scene, f: &SessionFile, s: &mut Session) {
+/// Applies what `f` holds to `s`; returns a sentence for each thing it could not.
+fn apply_session(scene: &Scene, f: &SessionFile, s: &mut Session) -> Vec<String> {
+    let mut lost = Vec::new();
     s.objectives = f
         .objectives
         .iter()
         .filter_map(|o| {
+            let objective = o.record.to_objective();
+            if objective.is_none() {
+                lost.push(format!(
+                    "objective {} (`{}`): its aspects or region do not parse",
+                    o.id, o.record.image
+                ));
+            }
             Some(Entry {
                 id: o.id,
-                objective: o.record.to_objective()?,
+                objective: objective?,
             })
         })
         .collect();
     s.next_id = f
         .next_id
         .max(s.objectives.iter().map(|e| e.id + 1).max().unwrap_or(1));
-    for name in &f.key_groups {
-        if let Some(g) = scene.group_index(name) {
-            s.key_groups[g] = true;
-        }
-    }
-    for name in &f.locked_groups {
-        if let Some(g) = scene.group_index(name) {
-            s.locked_groups[g] = true;
+    for (names, flags, what) in [
+        (&f.key_groups, &mut s.key_groups, "key"),
+        (&f.locked_groups, &mut s.locked_groups, "lock"),
+    ] {
+        for name in names {
+            match scene.group_index(name) {
+                Some(g) => flags[g] = true,
+                None => lost.push(format!(
+                    "the {what} on group `{name}`: the scene has no such group"
+                )),
+            }
         }
     }
     for &ch in &f.locked_lights {
-        if let Some(l) = scene.light_index(ch) {
-            s.locked_lights[l] = true;
+        match scene.light_index(ch) {
+            Some(l) => s.locked_lights[l] = true,
+            None => lost.push(format!(
+                "the lock on light {ch}: the scene has no such light"
+            )),
         }
     }
     s.count = f.count.clamp(1, 1000);
@@ -166,6 +203,7 @@ fn apply_session(scene: &Scene, f: &SessionFile, s: &mut Session) {
     if f.fade_s.is_finite() {
         s.fade_s = f.fade_s.clamp(0.0, 600.0);
     }
+    lost
 }
 
 /// The snapshot the background writer persists.
@@ -222,11 +260,23 @@ impl Snapshot {
 
 /// A thread that writes the latest [`Snapshot`] it was handed, dropping older ones.
 /// Discrete changes (pick, recall, ...) wait until their snapshot is on disk before they
-/// are answered; fader moves do not wait.
+/// are answered, and hear of a failed write; fader moves do not wait.
 pub struct Writer {
-    tx: mpsc::Sender<(u64, Snapshot)>,
+    tx: Mutex<Option<mpsc::Sender<(u64, Snapshot)>>>,
     next: AtomicU64,
-    written: Arc<(Mutex<u64>, Condvar)>,
+    written: Arc<(Mutex<Written>, Condvar)>,
+    thread: Mutex<Option<JoinHandle<()>>>,
+    /// Test hook: milliseconds each write waits first, standing in for a slow disk.
+    slow_ms: Arc<AtomicU64>,
+}
+
+/// The newest write the thread finished.
+#[derive(Debug, Default)]
+struct Written {
+    /// Its ticket: every snapshot up to it is on disk, or failed with `error`.
+    ticket: u64,
+    /// Why it failed (snapshots are whole, so a later success covers earlier tickets).
+    error: Option<String>,
 }
 
 /// How long a caller waits for its snapshot before answering anyway (a stalled disk must
@@ -237,9 +287,11 @@ impl Writer {
     /// Starts the writer for `files`.
     pub fn start(files: Files) -> std::io::Result<Writer> {
         let (tx, rx) = mpsc::channel::<(u64, Snapshot)>();
-        let written = Arc::new((Mutex::new(0u64), Condvar::new()));
+        let written = Arc::new((Mutex::new(Written::default()), Condvar::new()));
         let done = Arc::clone(&written);
-        std::thread::Builder::new()
+        let slow_ms = Arc::new(AtomicU64::new(0));
+        let slow = Arc::clone(&slow_ms);
+        let thread = std::thread::Builder::new()
             .name("state-writer".into())
             .spawn(move || {
                 while let Ok(mut latest) = rx.recv() {
@@ -248,25 +300,30 @@ impl Writer {
                         latest = newer;
                     }
                     let (ticket, snap) = latest;
+                    std::thread::sleep(Duration::from_millis(slow.load(Ordering::Relaxed)));
+                    let mut error = None;
                     for (path, result) in [
                         (files.live(), save_json(&files.live(), &snap.live)),
                         (files.session(), save_json(&files.session(), &snap.session)),
                     ] {
                         if let Err(e) = result {
                             tracing::error!("{}: cannot save: {e}", path.display());
+                            error.get_or_insert(e.to_string());
                         }
                     }
                     let (lock, cvar) = &*done;
-                    if let Ok(mut w) = lock.lock() {
-                        *w = (*w).max(ticket);
-                    }
+                    let mut w = lock.lock().unwrap_or_else(|p| p.into_inner());
+                    *w = Written { ticket, error };
+                    drop(w);
                     cvar.notify_all();
                 }
             })?;
         Ok(Writer {
-            tx,
+            tx: Mutex::new(Some(tx)),
             next: AtomicU64::new(1),
             written,
+            thread: Mutex::new(Some(thread)),
+            slow_ms,
         })
     }
 
@@ -274,16 +331,47 @@ impl Writer {
     /// lock, so tickets follow the order of the changes.
     pub fn save(&self, snap: Snapshot) -> u64 {
         let ticket = self.next.fetch_add(1, Ordering::SeqCst);
-        let _ = self.tx.send((ticket, snap));
+        let tx = self.tx.lock().unwrap_or_else(|p| p.into_inner());
+        if tx
+            .as_ref()
+            .is_none_or(|tx| tx.send((ticket, snap)).is_err())
+        {
+            tracing::warn!("a change after the state writer stopped was not saved");
+        }
         ticket
     }
 
-    /// Waits (bounded) until the snapshot of `ticket`, or a newer one, is on disk. Call it
-    /// after releasing the session lock.
-    pub fn wait(&self, ticket: u64) {
+    /// Waits (bounded) until the snapshot of `ticket`, or a newer one, is on disk; the
+    /// error of that write if it failed. Call it after releasing the session lock.
+    pub fn wait(&self, ticket: u64) -> Result<(), String> {
         let (lock, cvar) = &*self.written;
-        if let Ok(guard) = lock.lock() {
-            let _ = cvar.wait_timeout_while(guard, FLUSH_WAIT, |w| *w < ticket);
+        let guard = lock.lock().unwrap_or_else(|p| p.into_inner());
+        let (w, timeout) = cvar
+            .wait_timeout_while(guard, FLUSH_WAIT, |w| w.ticket < ticket)
+            .unwrap_or_else(|p| p.into_inner());
+        if timeout.timed_out() {
+            tracing::warn!(
+                "the state folder has not taken a change within {} s; it is written when the disk answers",
+                FLUSH_WAIT.as_secs()
+            );
+        }
+        w.error.clone().map_or(Ok(()), Err)
+    }
+
+    /// Test hook: every later write first waits `ms` milliseconds (a slow disk).
+    pub fn slow_down(&self, ms: u64) {
+        self.slow_ms.store(ms, Ordering::Relaxed);
+    }
+
+    /// Writes what is still queued and stops the thread (at shutdown: the last fader move
+    /// survives a clean stop). Later saves are logged and dropped.
+    pub fn finish(&self) {
+        drop(self.tx.lock().unwrap_or_else(|p| p.into_inner()).take());
+        let thread = self.thread.lock().unwrap_or_else(|p| p.into_inner()).take();
+        if let Some(t) = thread
+            && t.join().is_err()
+        {
+            tracing::error!("the state writer panicked; the last change may not be saved");
         }
     }
 }

@@ -17,7 +17,7 @@ use std::io;
 use std::net::{IpAddr, Ipv4Addr, SocketAddr, UdpSocket};
 use std::path::Path;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
 use std::thread::{self, JoinHandle};
 use std::time::{Duration, Instant};
 
@@ -74,6 +74,25 @@ struct Counters {
     frames: Vec<AtomicU64>,
     send_errors: AtomicU64,
     worst_late_us: AtomicU64,
+    /// Ticks of the clock since start: the watchdog pings only while this advances.
+    ticks: AtomicU64,
+    /// Ticks that woke more than half a period after their deadline.
+    late_ticks: AtomicU64,
+    /// Ticks per second over the last whole second, as `f32` bits.
+    tick_rate: AtomicU32,
+    /// Per destination (sACN ones first, in config order): its label and failed sends.
+    destinations: Vec<(String, AtomicU64)>,
+    hooks: Hooks,
+}
+
+/// Faults a test can inject into the clock (the daemon enables them only under
+/// `VISOBJD_TEST_HOOKS`), to check that the watchdog and the service manager notice.
+#[derive(Debug, Default)]
+struct Hooks {
+    /// While set, the clock sends nothing and its tick count stands still.
+    stall: AtomicBool,
+    /// When set, the clock thread panics at its next tick.
+    panic: AtomicBool,
 }
 
 /// A snapshot of the output's counters, for status and benchmarks.
@@ -85,6 +104,29 @@ pub struct OutputStats {
     pub send_errors: u64,
     /// The latest any tick woke after its deadline.
     pub worst_lateness: Duration,
+    /// Ticks of the clock since start (one computed frame each, sent or idled).
+    pub ticks: u64,
+    /// Ticks that woke more than half a period after their deadline.
+    pub late_ticks: u64,
+    /// Ticks per second over the last whole second (0 until a second has passed).
+    pub tick_rate: f32,
+    /// Per destination: a label such as `sACN 10.101.0.5:5568` and its failed sends.
+    pub destinations: Vec<(String, u64)>,
+}
+
+impl OutputStats {
+    /// One phrase for a status line: `DMX 44 fps`, with the late frames and failed sends
+    /// when there are any.
+    pub fn summary(&self) -> String {
+        let mut out = format!("DMX {:.0} fps", self.tick_rate);
+        if self.late_ticks > 0 {
+            out += &format!(", {} late", self.late_ticks);
+        }
+        if self.send_errors > 0 {
+            out += &format!(", {} send errors", self.send_errors);
+        }
+        out
+    }
 }
 
 /// The running output. Dropping it stops the clock like [`Output::shutdown`].
@@ -116,9 +158,15 @@ impl Output {
         })?;
         let mut sockets = Sockets::default();
         let mut sacn = Vec::new();
+        let mut destinations = Vec::new();
         for d in &config.sacn {
             let target = d.target().map_err(OutputError::Config)?;
+            destinations.push((
+                format!("sACN {}:{}", d.destination, d.port),
+                AtomicU64::new(0),
+            ));
             sacn.push(SacnSink {
+                errors: destinations.len() - 1,
                 socket: sockets.bind(d.bind)?,
                 target,
                 port: d.port,
@@ -138,7 +186,12 @@ impl Output {
                 .map(|&u| d.port_address(u))
                 .collect::<Option<Vec<_>>>()
                 .ok_or_else(|| OutputError::Config("output.artnet: bad universe_offset".into()))?;
+            destinations.push((
+                format!("Art-Net {}:{}", d.destination, d.port),
+                AtomicU64::new(0),
+            ));
             artnet.push(ArtnetSink {
+                errors: destinations.len() - 1,
                 socket: sockets.bind(d.bind)?,
                 to: SocketAddr::new(ip, d.port),
                 port_addresses,
@@ -151,6 +204,11 @@ impl Output {
             frames: universes.iter().map(|_| AtomicU64::new(0)).collect(),
             send_errors: AtomicU64::new(0),
             worst_late_us: AtomicU64::new(0),
+            ticks: AtomicU64::new(0),
+            late_ticks: AtomicU64::new(0),
+            tick_rate: AtomicU32::new(0),
+            destinations,
+            hooks: Hooks::default(),
         });
         let now = Instant::now();
         let initial = Arc::new(initial);
@@ -191,7 +249,17 @@ impl Output {
         };
         let thread = thread::Builder::new()
             .name("dmx-output".into())
-            .spawn(move || clock.run())
+            .spawn(move || {
+                // A clock that died would leave a dark stage behind a live process (and
+                // its OSC answering): end the process instead, so the service manager
+                // restarts it and the saved live look is back on the wire at once.
+                if std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| clock.run())).is_err() {
+                    tracing::error!(
+                        "the DMX output clock panicked: aborting so that the service restarts"
+                    );
+                    std::process::abort();
+                }
+            })
             .map_err(OutputError::Thread)?;
         Ok(Output {
             desired,
@@ -237,18 +305,38 @@ impl Output {
 
     /// The counters so far.
     pub fn stats(&self) -> OutputStats {
+        let c = &*self.counters;
         OutputStats {
             frames: self
                 .universes
                 .iter()
-                .zip(&self.counters.frames)
+                .zip(&c.frames)
                 .map(|(&u, n)| (u, n.load(Ordering::Relaxed)))
                 .collect(),
-            send_errors: self.counters.send_errors.load(Ordering::Relaxed),
-            worst_lateness: Duration::from_micros(
-                self.counters.worst_late_us.load(Ordering::Relaxed),
-            ),
+            send_errors: c.send_errors.load(Ordering::Relaxed),
+            worst_lateness: Duration::from_micros(c.worst_late_us.load(Ordering::Relaxed)),
+            ticks: c.ticks.load(Ordering::Relaxed),
+            late_ticks: c.late_ticks.load(Ordering::Relaxed),
+            tick_rate: f32::from_bits(c.tick_rate.load(Ordering::Relaxed)),
+            destinations: c
+                .destinations
+                .iter()
+                .map(|(name, n)| (name.clone(), n.load(Ordering::Relaxed)))
+                .collect(),
         }
+    }
+
+    /// Test hook: holds the clock still (nothing sent, no ticks) while `on`.
+    pub fn stall(&self, on: bool) {
+        self.counters.hooks.stall.store(on, Ordering::Relaxed);
+        if let Some(t) = &self.thread {
+            t.thread().unpark();
+        }
+    }
+
+    /// Test hook: makes the clock thread panic at its next tick (the process then aborts).
+    pub fn panic_clock(&self) {
+        self.counters.hooks.panic.store(true, Ordering::Relaxed);
     }
 
     /// Orderly stop: the clock finishes its tick, sends three Stream_Terminated packets per
@@ -305,9 +393,11 @@ impl Sockets {
 
 /// Sends one encoded packet; a failure (encoding or socket) is counted and logged at a
 /// rate-limited pace, never fatal: the clock goes on.
+#[allow(clippy::too_many_arguments)]
 fn deliver(
     socket: &UdpSocket,
     counters: &Counters,
+    destination: usize,
     log: &mut Throttle,
     now: Instant,
     protocol: &str,
@@ -317,6 +407,9 @@ fn deliver(
     let result = packet.and_then(|p| socket.send_to(p, to).map(drop).map_err(|e| e.to_string()));
     if let Err(e) = result {
         counters.send_errors.fetch_add(1, Ordering::Relaxed);
+        counters.destinations[destination]
+            .1
+            .fetch_add(1, Ordering::Relaxed);
         log.error(now, protocol, to, &e);
     }
 }
@@ -351,6 +444,8 @@ impl Throttle {
 
 struct SacnSink {
     socket: usize,
+    /// Index of its counter in [`Counters::destinations`].
+    errors: usize,
     target: SacnTarget,
     port: u16,
     source_name: String,
@@ -379,6 +474,8 @@ impl SacnSink {
 
 struct ArtnetSink {
     socket: usize,
+    /// Index of its counter in [`Counters::destinations`].
+    errors: usize,
     to: SocketAddr,
     /// Per patched universe.
     port_addresses: Vec<u16>,
@@ -426,6 +523,7 @@ impl Clock {
     fn run(mut self) {
         let mut next = Instant::now();
         let mut first = true;
+        let mut window = (next, 0u64);
         loop {
             // Wait for the deadline; an unpark from shutdown ends the wait early.
             loop {
@@ -439,11 +537,23 @@ impl Clock {
                 }
                 thread::park_timeout(next - now);
             }
+            self.test_hooks();
             let now = Instant::now();
             let late = now.saturating_duration_since(next);
-            self.counters
-                .worst_late_us
+            let c = &*self.counters;
+            c.worst_late_us
                 .fetch_max(late.as_micros() as u64, Ordering::Relaxed);
+            if late > self.period / 2 {
+                c.late_ticks.fetch_add(1, Ordering::Relaxed);
+            }
+            let ticks = c.ticks.fetch_add(1, Ordering::Relaxed) + 1;
+            let span = now.duration_since(window.0);
+            if span >= Duration::from_secs(1) {
+                let rate = (ticks - window.1) as f64 / span.as_secs_f64();
+                c.tick_rate
+                    .store((rate as f32).to_bits(), Ordering::Relaxed);
+                window = (now, ticks);
+            }
             if late > self.period {
                 // Too late to catch up frame by frame: restart the schedule from now.
                 next = now;
@@ -451,6 +561,17 @@ impl Clock {
             self.tick(now, first);
             first = false;
             next += self.period;
+        }
+    }
+
+    /// The faults a test asked for: a panic, or a stall until released (or stopped).
+    fn test_hooks(&self) {
+        let hooks = &self.counters.hooks;
+        if hooks.panic.load(Ordering::Relaxed) {
+            panic!("test hook: the DMX output clock panics");
+        }
+        while hooks.stall.load(Ordering::Relaxed) && !self.stop.load(Ordering::Acquire) {
+            thread::park_timeout(Duration::from_millis(10));
         }
     }
 
@@ -542,6 +663,7 @@ impl Clock {
             deliver(
                 socket,
                 &self.counters,
+                sink.errors,
                 &mut sink.log,
                 now,
                 "sACN",
@@ -561,6 +683,7 @@ impl Clock {
             deliver(
                 socket,
                 &self.counters,
+                sink.errors,
                 &mut sink.log,
                 now,
                 "Art-Net",
@@ -586,6 +709,7 @@ impl Clock {
             deliver(
                 socket,
                 &self.counters,
+                sink.errors,
                 &mut sink.log,
                 now,
                 "sACN",

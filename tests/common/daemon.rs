@@ -250,10 +250,39 @@ pub struct Status {
     pub master: f64,
 }
 
+/// The output's health as `/vo/status` ends with it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Health {
+    pub fps: f64,
+    pub late: i32,
+    pub send_errors: i32,
+    /// (label, failed sends) per destination.
+    pub destinations: Vec<(String, i32)>,
+}
+
+impl Health {
+    pub fn parse(m: &OscMessage) -> Health {
+        let a = &m.args;
+        assert!(
+            a.len() >= 12 && (a.len() - 12).is_multiple_of(2),
+            "/vo/status: 9 session arguments, fps, late, errors, then (destination, errors) pairs: {a:?}"
+        );
+        Health {
+            fps: num(&a[9]),
+            late: num(&a[10]) as i32,
+            send_errors: num(&a[11]) as i32,
+            destinations: a[12..]
+                .chunks(2)
+                .map(|p| (text(&p[0]), num(&p[1]) as i32))
+                .collect(),
+        }
+    }
+}
+
 impl Status {
     fn parse(m: &OscMessage) -> Status {
         let a = &m.args;
-        assert_eq!(a.len(), 9, "/vo/status has 9 arguments: {a:?}");
+        Health::parse(m);
         Status {
             scene: text(&a[0]),
             lights: num(&a[1]) as i32,
@@ -410,6 +439,10 @@ pub trait Osc {
             "no /vo/pong for the fence ping {token}; got {before:?}\n--- daemon log ---\n{}",
             self.log()
         );
+    }
+
+    fn health(&mut self) -> Health {
+        Health::parse(&self.ok("/vo/status", vec![], "/vo/status"))
     }
 
     fn status(&mut self) -> Status {
@@ -1069,6 +1102,8 @@ pub struct Setup {
     pub client: IpAddr,
     /// TOML appended to the config (new sections).
     pub extra: String,
+    /// Environment variables the daemon is started with.
+    pub env: Vec<(String, String)>,
 }
 
 pub const LOCALHOST: IpAddr = IpAddr::V4(Ipv4Addr::LOCALHOST);
@@ -1081,6 +1116,7 @@ impl Default for Setup {
             allow: Vec::new(),
             client: LOCALHOST,
             extra: String::new(),
+            env: Vec::new(),
         }
     }
 }
@@ -1157,6 +1193,7 @@ impl Daemon {
             .arg("run")
             .arg("--config")
             .arg(&self.config)
+            .envs(self.setup.env.iter().map(|(k, v)| (k, v)))
             .stdin(Stdio::null())
             .stdout(Stdio::null())
             .stderr(File::create(&self.log).expect("stderr file"))
@@ -1266,12 +1303,17 @@ impl Daemon {
 
     /// SIGTERM; waits (bounded) for the exit and returns its status.
     pub fn terminate(&mut self) -> ExitStatus {
-        let mut child = self.child.take().expect("running");
         let ok = Command::new("kill")
-            .args(["-TERM", &child.id().to_string()])
+            .args(["-TERM", &self.pid().to_string()])
             .status()
             .is_ok_and(|s| s.success());
         assert!(ok, "kill -TERM failed");
+        self.wait_exit("SIGTERM")
+    }
+
+    /// Waits (bounded) for the process to exit after `what`, and returns its status.
+    pub fn wait_exit(&mut self, what: &str) -> ExitStatus {
+        let mut child = self.child.take().expect("running");
         let end = Instant::now() + Duration::from_secs(10);
         loop {
             if let Some(status) = child.try_wait().expect("wait") {
@@ -1281,7 +1323,7 @@ impl Daemon {
                 let _ = child.kill();
                 let _ = child.wait();
                 panic!(
-                    "no exit within 10 s of SIGTERM\n--- daemon log ---\n{}",
+                    "no exit within 10 s of {what}\n--- daemon log ---\n{}",
                     log_tail(&self.log)
                 );
             }
