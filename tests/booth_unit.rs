@@ -276,7 +276,8 @@ fn prepare_for_nobody(dir: &Path) {
     );
     let state = dir.join("state");
     std::fs::create_dir_all(&state).expect("mkdir state");
-    std::os::unix::fs::chown(&state, Some(NOBODY), Some(NOBODY)).expect("chown state");
+    std::os::unix::fs::chown(&state, Some(NOBODY), Some(NOBODY))
+        .expect("chown the state folder to uid 65534 (the test runs as root, as CI does)");
     std::fs::set_permissions(&state, std::fs::Permissions::from_mode(0o750)).expect("chmod");
     let mut todo = vec![dir.to_path_buf()];
     while let Some(path) = todo.pop() {
@@ -316,6 +317,7 @@ fn launch(seccomp: BpfProgram, notify: PathBuf, user: Option<u32>) -> common::da
             .env("WATCHDOG_USEC", &watchdog);
         if let Some(id) = user {
             prepare_for_nobody(dir);
+            assert_traversable(&notify, "the notify socket");
             command.uid(id).gid(id);
         }
         let seccomp = Arc::clone(&seccomp);
