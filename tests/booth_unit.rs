@@ -24,7 +24,9 @@ use std::time::Instant;
 use seccompiler::{BpfProgram, SeccompAction, SeccompFilter, TargetArch};
 use syscalls::Sysno;
 
-use common::daemon::{Daemon, Osc, PATIENCE, PROTOS, Proto, Setup, UNIVERSES, int, string};
+use common::daemon::{
+    Daemon, Osc, PATIENCE, PROTOS, Proto, Setup, UNIVERSES, int, same_look, string,
+};
 use common::{bin, temp_dir};
 
 /// The unit under test.
@@ -335,7 +337,7 @@ fn launch(seccomp: BpfProgram, notify: PathBuf, user: Option<u32>) -> common::da
     })
 }
 
-/// The lines of `/proc/PID/status` that start with `key:`, its value trimmed.
+/// The value of `key:` in `/proc/PID/status`, its whitespace collapsed.
 fn proc_status(pid: u32, key: &str) -> String {
     let status = std::fs::read_to_string(format!("/proc/{pid}/status")).expect("/proc status");
     status
@@ -403,7 +405,18 @@ fn booth_session(name: &str, user: Option<u32>) {
         vec![int(1), string("booth")],
         "/vo/look/saved",
     );
-    d.ok("/vo/light/1/level", vec![int(5)], "/vo/light");
+    // A fader far from the saved level, so the recall has something to undo.
+    let saved = picked
+        .iter()
+        .find(|l| l.ch == 1)
+        .expect("light 1")
+        .intensity;
+    let away = if saved > 0.5 { 0 } else { 100 };
+    d.ok("/vo/light/1/level", vec![int(away)], "/vo/light");
+    assert!(
+        !same_look(&d.live(), &picked, 0.1),
+        "the fader changed nothing"
+    );
     d.ok("/vo/look/recall", vec![int(1)], "/vo/look/recalled");
     for proto in PROTOS {
         d.wire.wait_look(proto, &picked);
