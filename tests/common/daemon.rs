@@ -1121,6 +1121,11 @@ impl Default for Setup {
     }
 }
 
+/// Changes the daemon's `Command` just before each start, given the daemon's folder: the
+/// program, arguments and stdio are set; a test adds what a service manager would (a system
+/// call filter, another user, its environment).
+pub type Launch = Box<dyn FnMut(&Path, &mut Command) + Send>;
+
 /// A running `visobjd run` with its own folder, ports and receivers. Dropping it kills the
 /// daemon; the folder is removed unless the test failed.
 pub struct Daemon {
@@ -1133,6 +1138,7 @@ pub struct Daemon {
     log: PathBuf,
     pub wire: Wire,
     osc: Udp,
+    launch: Launch,
 }
 
 impl Daemon {
@@ -1154,6 +1160,11 @@ impl Daemon {
 
     /// [`Daemon::start`] with other listen addresses, allow-list or extra config.
     pub fn start_setup(name: &str, setup: Setup) -> Daemon {
+        Daemon::start_setup_with(name, setup, Box::new(|_, _| {}))
+    }
+
+    /// [`Daemon::start_setup`], each start (restarts too) launched through `launch`.
+    pub fn start_setup_with(name: &str, setup: Setup, launch: Launch) -> Daemon {
         let dir = temp_dir(&format!("daemon-{name}"));
         build_stage(&dir);
         let wire = Wire::start();
@@ -1168,6 +1179,7 @@ impl Daemon {
             setup,
             log,
             wire,
+            launch,
         };
         let mut last = String::new();
         for _ in 0..3 {
@@ -1189,16 +1201,17 @@ impl Daemon {
         self.starts += 1;
         self.log = self.dir.join(format!("stderr-{}.log", self.starts));
         self.osc.log = self.log.clone();
-        let child = Command::new(bin())
+        let mut command = Command::new(bin());
+        command
             .arg("run")
             .arg("--config")
             .arg(&self.config)
             .envs(self.setup.env.iter().map(|(k, v)| (k, v)))
             .stdin(Stdio::null())
             .stdout(Stdio::null())
-            .stderr(File::create(&self.log).expect("stderr file"))
-            .spawn()
-            .expect("visobjd starts");
+            .stderr(File::create(&self.log).expect("stderr file"));
+        (self.launch)(&self.dir, &mut command);
+        let child = command.spawn().expect("visobjd starts");
         self.child = Some(child);
         let end = Instant::now() + Duration::from_secs(10);
         let token = TOKEN.fetch_add(1, Ordering::Relaxed);
