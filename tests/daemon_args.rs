@@ -6,8 +6,8 @@ mod common;
 
 use std::process::Command;
 
-use common::bin;
 use common::daemon::{Daemon, Framing, Osc, double, float, int, long, msg, num, string};
+use common::{bin, tools};
 use rosc::{OscBundle, OscPacket, OscTime, OscType};
 
 #[test]
@@ -282,12 +282,12 @@ for mode in ("1.0", "1.1"):
 /// real daemon over UDP and both TCP framings.
 #[test]
 fn python_osc_gets_the_documented_replies() {
-    let probe = Command::new("python3")
-        .args(["-c", "import pythonosc"])
-        .output();
-    if !probe.is_ok_and(|o| o.status.success()) {
-        println!("note: python3 with python-osc is not installed; cross-check skipped");
-        return;
+    if !tools::python_osc() {
+        return tools::missing(
+            "python-osc",
+            "is not importable by python3",
+            "python3 -m pip install python-osc",
+        );
     }
     let d = Daemon::start("python-osc");
     let out = Command::new("python3")

@@ -4,14 +4,18 @@
 //! DMX must keep its rate with no gap over two frame periods, the pings must be answered,
 //! and memory must stay bounded (VmRSS before and after).
 //!
-//! The suite runs a 2 s, scaled-down load. The full one (10 s, 20,000 messages/s, 50 TCP
-//! clients, ping p99 <= 50 ms) is `#[ignore]`d:
-//! `cargo test --release --test daemon_load -- --ignored --nocapture`
+//! Two floods, each at its full rate with 50 TCP clients: mixed messages at 20,000/s and
+//! saves and recalls at 2,000/s. `cargo test` and CI run each for 5 s; the full run is 10 s
+//! each (`VISOBJD_LOAD_SECS` sets the length):
+//! `VISOBJD_FULL=1 cargo test --release --test daemon_load -- --nocapture`
+//! Ping round trips (p50, p99, worst) are printed, not asserted: timings belong in the
+//! figures, not in a pass or fail on a shared machine.
 
 mod common;
 
 use std::io::{ErrorKind, Read, Write};
 use std::net::{SocketAddr, TcpStream, UdpSocket};
+use std::sync::{Mutex, PoisonError};
 use std::time::{Duration, Instant};
 
 use common::daemon::{Daemon, GAP, Osc, PROTOS, UNIVERSES, int, msg, string};
@@ -75,9 +79,13 @@ fn flood_packets(flood: Flood) -> Vec<Vec<u8>> {
     v
 }
 
+/// Held by a load run: the runs take turns, so each daemon is measured under its own load.
+static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
+
 /// Runs the load for `secs` seconds at `rate` flood messages a second with `tcp` TCP
 /// clients (a third idle, a third dribbling a byte a second, a third pinging every 100 ms).
 fn load(name: &str, flood: Flood, secs: u64, rate: u64, tcp: usize) -> Report {
+    let _turn = ONE_AT_A_TIME.lock().unwrap_or_else(PoisonError::into_inner);
     let mut d = Daemon::start(name);
     for proto in PROTOS {
         for u in UNIVERSES {
@@ -255,56 +263,38 @@ impl Report {
     }
 }
 
-/// The checks both runs share.
-fn check(r: &Report, tcp: usize) {
+/// Runs `flood` at `rate` messages a second with 50 TCP clients for the configured length,
+/// and checks what every run must keep: the DMX frames, the TCP clients, every ping
+/// answered, bounded memory, and the flood really sent.
+fn run(name: &str, flood: Flood, rate: u64) {
+    const TCP: usize = 50;
+    let secs = common::size("VISOBJD_LOAD_SECS", 5, 10);
+    let r = load(name, flood, secs, rate, TCP);
+    println!("{secs} s of {flood:?} at {rate}/s: {}", r.summary());
     assert!(
         r.max_gap <= GAP,
         "a DMX gap of {:?} (> {GAP:?}) under load: {r:?}",
         r.max_gap
     );
-    assert_eq!(r.tcp_clients_open_at_end, tcp, "{r:?}");
+    assert_eq!(r.tcp_clients_open_at_end, TCP, "{r:?}");
     assert!(
         r.tcp_reply_bytes > 0,
         "the pinging TCP clients were answered: {r:?}"
     );
+    assert_eq!(r.pings_lost, 0, "{r:?}");
+    // Loopback sends fail only on a local error: all but a few went out.
+    assert!(r.flood_sent >= secs * rate * 95 / 100, "{r:?}");
     // Nothing is kept per message: 64 MiB covers the allocator's slack many times over.
     let grown = r.rss_after_kib.saturating_sub(r.rss_before_kib);
     assert!(grown < 64 * 1024, "RSS grew by {grown} KiB: {r:?}");
 }
 
 #[test]
-fn a_short_load_keeps_the_frames_and_the_answers() {
-    let r = load("load-short", Flood::Mixed, 2, 5_000, 12);
-    println!("{}", r.summary());
-    check(&r, 12);
-    assert_eq!(r.pings_lost, 0, "{r:?}");
+fn a_flood_of_mixed_messages_keeps_the_frames_and_the_answers() {
+    run("load-mixed", Flood::Mixed, 20_000);
 }
 
 #[test]
-#[ignore = "10 s of 20,000 messages/s: run with --ignored"]
-fn ten_seconds_of_twenty_thousand_messages_a_second() {
-    let r = load("load-full", Flood::Mixed, 10, 20_000, 50);
-    println!("{}", r.summary());
-    check(&r, 50);
-    assert!(r.flood_sent >= 190_000, "{r:?}");
-    assert_eq!(r.pings_lost, 0, "{r:?}");
-    assert!(
-        r.p99 <= Duration::from_millis(50),
-        "ping p99 {:?}: {r:?}",
-        r.p99
-    );
-}
-
-#[test]
-#[ignore = "10 s of 2,000 saves and recalls/s: run with --ignored"]
-fn ten_seconds_of_two_thousand_saves_a_second() {
-    let r = load("load-saves", Flood::Saves, 10, 2_000, 50);
-    println!("{}", r.summary());
-    check(&r, 50);
-    assert_eq!(r.pings_lost, 0, "{r:?}");
-    assert!(
-        r.p99 <= Duration::from_millis(50),
-        "ping p99 {:?}: {r:?}",
-        r.p99
-    );
+fn a_flood_of_saves_and_recalls_keeps_the_frames_and_the_answers() {
+    run("load-saves", Flood::Saves, 2_000);
 }

@@ -1,6 +1,8 @@
 //! The OSC transport over real loopback sockets: a test handler behind the server, clients
 //! speaking UDP, TCP with a length prefix and TCP with SLIP, the `visobjd send` binary, and
-//! (when installed) python-osc as an independent peer.
+//! python-osc as an independent peer.
+
+mod common;
 
 use std::io::{ErrorKind, Read, Write};
 use std::net::{SocketAddr, TcpListener, TcpStream, UdpSocket};
@@ -8,6 +10,7 @@ use std::process::Command;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
+use common::tools;
 use rosc::{OscBundle, OscMessage, OscPacket, OscTime, OscType};
 use visobjd::config::OscConfig;
 use visobjd::osc::framing::{self, Decoder, Frame, Framing};
@@ -363,8 +366,11 @@ fn senders_outside_the_allow_list_get_nothing() {
 #[test]
 fn udp_on_ipv6_loopback() {
     if UdpSocket::bind("[::1]:0").is_err() {
-        println!("note: no IPv6 loopback here; skipped");
-        return;
+        return tools::missing(
+            "IPv6 loopback (::1)",
+            "is not available",
+            "sysctl -w net.ipv6.conf.lo.disable_ipv6=0",
+        );
     }
     let h = serve_with(
         OscConfig {
@@ -751,12 +757,12 @@ for mode in ("1.0", "1.1"):
 
 #[test]
 fn python_osc_talks_to_the_server() {
-    let probe = Command::new("python3")
-        .args(["-c", "import pythonosc"])
-        .output();
-    if !probe.is_ok_and(|o| o.status.success()) {
-        println!("note: python3 with python-osc is not installed; cross-check skipped");
-        return;
+    if !tools::python_osc() {
+        return tools::missing(
+            "python-osc",
+            "is not importable by python3",
+            "python3 -m pip install python-osc",
+        );
     }
     let h = serve();
     let out = Command::new("python3")

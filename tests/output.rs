@@ -15,6 +15,7 @@ use visobjd::scene::Scene;
 
 mod common;
 
+use common::tools;
 use common::wire::{ArtDmx, Sacn, parse_artnet, parse_sacn, parse_sync};
 
 // ---- fixtures --------------------------------------------------------------------------
@@ -352,8 +353,7 @@ fn multicast_in_private_network_namespace() {
             .env(NETNS_CHILD, "1")
             .output();
         let Ok(out) = out else {
-            println!("note: skipping the multicast test: `unshare` is not available");
-            return;
+            return tools::missing("unshare", "is not installed", "apt-get install util-linux");
         };
         let stdout = String::from_utf8_lossy(&out.stdout);
         if stdout.contains("NETNS-CHILD-PASSED") {
@@ -367,7 +367,11 @@ fn multicast_in_private_network_namespace() {
             );
         }
     }
-    println!("note: skipping the multicast test: `unshare` is not permitted here");
+    tools::missing(
+        "unshare",
+        "may not create a network namespace here",
+        "run the tests as root, or allow unprivileged user namespaces",
+    );
 }
 
 fn multicast_child() {
@@ -424,8 +428,7 @@ const MARKER_FILTER: &str = "udp.length == 14";
 #[test]
 fn tshark_decodes_every_packet() {
     if Command::new("tshark").arg("-v").output().is_err() {
-        println!("note: skipping the tshark test: tshark is not installed");
-        return;
+        return tools::missing("tshark", "is not installed", "apt-get install tshark");
     }
     let mut rig = rig(44);
     rig.config.sacn[0].sync_universe = 7;
@@ -463,8 +466,11 @@ fn tshark_decodes_every_packet() {
     if ready.recv_timeout(Duration::from_secs(10)).is_err() {
         let _ = tshark.kill();
         let _ = tshark.wait();
-        println!("note: skipping the tshark test: tshark cannot capture on lo here");
-        return;
+        return tools::missing(
+            "tshark",
+            "cannot capture on lo here",
+            "run the tests as root, or let dumpcap capture (dpkg-reconfigure wireshark-common)",
+        );
     }
     let out = start(&rig.config, &dir, look(0.5, [1.0, 0.5, 0.0]));
     let (mut data, mut syncs) = (0, 0);

@@ -11,7 +11,7 @@ use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use common::daemon::{Daemon, Osc, PATIENCE, Proto, free_port, int};
-use common::temp_dir;
+use common::{temp_dir, tools};
 
 /// A daemon with the web gallery on; returns it and the gallery's address.
 fn start(name: &str) -> (Daemon, SocketAddr) {
@@ -399,10 +399,7 @@ fn open(browser: &Path, url: &str, name: &str) -> (Browser, Page) {
 #[test]
 fn a_tap_in_the_browser_puts_the_entry_live() {
     let Some(browser) = chromium() else {
-        println!(
-            "note: Chromium is not installed; the browser test is skipped (apt-get install chromium)"
-        );
-        return;
+        return tools::missing("Chromium", "is not installed", "apt-get install chromium");
     };
     let (mut d, addr) = start("web-chromium");
     d.ok(

@@ -1294,6 +1294,13 @@ impl Daemon {
             .expect("a VmRSS line")
     }
 
+    /// How many file descriptors the daemon has open.
+    pub fn open_fds(&self) -> usize {
+        std::fs::read_dir(format!("/proc/{}/fd", self.pid()))
+            .expect("/proc/PID/fd")
+            .count()
+    }
+
     /// Whether the process is still running (it has not exited).
     pub fn alive(&mut self) -> bool {
         self.child

@@ -2,6 +2,7 @@
 #![allow(dead_code)]
 
 pub mod daemon;
+pub mod tools;
 pub mod wire;
 
 use std::path::{Path, PathBuf};
@@ -168,6 +169,22 @@ pub fn stripes(dir: &Path, n: usize, mixed: bool) -> PathBuf {
         })
         .collect();
     write_scene(dir, w, 10, &[], &lights)
+}
+
+/// The size of a long run (kills, seconds, simulated minutes): the environment variable
+/// `knob` when set, else `full` with `VISOBJD_FULL=1`, else `short`. One test serves both:
+/// `cargo test` and CI run the short form, the documented command the full one.
+pub fn size(knob: &str, short: u64, full: u64) -> u64 {
+    if let Ok(v) = std::env::var(knob) {
+        return v
+            .parse()
+            .unwrap_or_else(|_| panic!("{knob}={v:?} is not a whole number"));
+    }
+    if std::env::var("VISOBJD_FULL").is_ok_and(|v| v == "1") {
+        full
+    } else {
+        short
+    }
 }
 
 /// Path of the built `visobjd` binary.

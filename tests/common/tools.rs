@@ -1,0 +1,28 @@
+//! The external tools and host features some tests need (tshark, Chromium, python-osc,
+//! `unshare`, tmpfs mounts, IPv6 loopback), and what a test does without one. Outside CI it
+//! skips with a note; under `CI=true` it fails, naming the tool and its remedy, because CI
+//! installs every tool (`.ci/run`) and a skip there would be a pass that tested nothing.
+
+use std::process::Command;
+
+/// Whether this is a CI run: the `CI` environment variable is `true`.
+pub fn in_ci() -> bool {
+    std::env::var("CI").is_ok_and(|v| v == "true")
+}
+
+/// Called by a test that cannot go on because `tool` `problem` (for example "is not
+/// installed"): panics under `CI=true`, else prints a note; the test then returns.
+/// `remedy` says how to get it (for example "apt-get install tshark").
+pub fn missing(tool: &str, problem: &str, remedy: &str) {
+    let text = format!("{tool} {problem} (to fix: {remedy})");
+    assert!(!in_ci(), "CI=true and {text}");
+    println!("note: test skipped: {text}; under CI=true this fails");
+}
+
+/// Whether python3 can import python-osc.
+pub fn python_osc() -> bool {
+    Command::new("python3")
+        .args(["-c", "import pythonosc"])
+        .output()
+        .is_ok_and(|o| o.status.success())
+}
