@@ -7,8 +7,8 @@ use std::path::{Path, PathBuf};
 use serde::Deserialize;
 
 use crate::eos::EosConfig;
-use crate::output::OutputConfig;
-use crate::scene::describe_toml_error;
+use visobjd_dmx::OutputConfig;
+use visobjd_scene::describe_toml_error;
 
 /// The whole configuration, paths resolved.
 #[derive(Debug, Clone)]

@@ -18,9 +18,9 @@ use std::time::Duration;
 use rosc::{OscMessage, OscPacket, OscType};
 use serde::Deserialize;
 
-use crate::look::Look;
+use visobjd_scene::look::Look;
 use crate::osc::framing::{self, Framing};
-use crate::scene::Scene;
+use visobjd_scene::Scene;
 
 /// How long connecting to and writing to the console may take.
 const TIMEOUT: Duration = Duration::from_secs(3);
@@ -82,7 +82,7 @@ pub fn preset_commands(scene: &Scene, look: &Look, n: u32) -> Vec<String> {
         ));
         if scene.profile(l).has_colour() {
             // Emitter levels at full: the same linear multiplier the DMX output uses.
-            let c = crate::look::Level {
+            let c = visobjd_scene::look::Level {
                 intensity: 1.0,
                 ..*level
             }

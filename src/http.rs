@@ -30,7 +30,7 @@ use tokio::sync::{Mutex, Semaphore};
 
 use crate::config::{Cidr, permits};
 use crate::engine::{Engine, EngineHandler, msg};
-use crate::look::Look;
+use visobjd_scene::look::Look;
 use crate::osc::{Handler, Peer};
 
 /// Largest request head (request line and headers).
@@ -471,7 +471,7 @@ async fn reference(shared: &Shared, id: u32) -> Answer {
         Err(e) => return Answer::text(404, &e),
     };
     let decoded = blocking(move || {
-        crate::objective::decode_reference(&path).map(|img| {
+        visobjd_method::objective::decode_reference(&path).map(|img| {
             let (w, h) = img.dimensions();
             let img = if w > REFERENCE_WIDTH {
                 let h = (u64::from(h) * u64::from(REFERENCE_WIDTH) / u64::from(w)).max(1) as u32;

@@ -191,7 +191,7 @@ fn render_draws_a_look_file() {
     );
     assert_eq!(img.dimensions(), (16, 10));
     // Light 2 lights columns 4..8 at 0.5 of white; at half intensity, red: linear 0.25.
-    let want = visobjd::color::encode_srgb8(0.25);
+    let want = visobjd_compositor::color::encode_srgb8(0.25);
     assert_eq!(img.get_pixel(5, 3).0, [want, 0, 0]);
     assert_eq!(img.get_pixel(0, 3).0, [0, 0, 0]);
 
@@ -386,7 +386,7 @@ fn basis_images_may_be_half_or_float_rgb_or_rgba_scanline_or_tiled() {
         &scene,
         r#"{"lights": [{"channel": 2, "intensity": 1.0}]}"#,
     );
-    let want = visobjd::color::encode_srgb8(0.5);
+    let want = visobjd_compositor::color::encode_srgb8(0.5);
     assert_eq!(img.get_pixel(5, 3).0, [want; 3]);
     assert_eq!(img.get_pixel(9, 3).0, [0; 3]);
 }

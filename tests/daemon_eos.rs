@@ -71,7 +71,7 @@ fn expected(live: &[Light], colour: &[bool], n: u32) -> Vec<String> {
             format!("{p:.1}")
         }
     };
-    let lin = |c: f32| visobjd::color::srgb_to_linear(c);
+    let lin = |c: f32| visobjd_scene::srgb::srgb_to_linear(c);
     let mut want = Vec::new();
     for (i, l) in live.iter().enumerate() {
         let (ch, [r, g, b]) = (l.ch, l.color);

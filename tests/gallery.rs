@@ -4,13 +4,13 @@ mod common;
 
 use rand::SeedableRng;
 use rand::rngs::Xoshiro256PlusPlus as Rng;
-use visobjd::color::encode_srgb8;
-use visobjd::gallery::{lab_proxies, mean_delta_e};
-use visobjd::look::{Level, Look};
-use visobjd::objective::{Aspects, Objective, Region, analyze};
-use visobjd::render::{composite, render_reference, weights};
-use visobjd::sampler::{Constraints, Spread};
-use visobjd::stage::{GenerateRequest, Stage};
+use visobjd_compositor::color::encode_srgb8;
+use visobjd_method::gallery::{lab_proxies, mean_delta_e};
+use visobjd_scene::look::{Level, Look};
+use visobjd_method::objective::{Aspects, Objective, Region, analyze};
+use visobjd_compositor::render::{composite, render_reference, weights};
+use visobjd_method::sampler::{Constraints, Spread};
+use visobjd_method::stage::{GenerateRequest, Stage};
 
 fn stage(name: &str, lights: usize) -> Stage {
     let dir = common::temp_dir(name);
@@ -61,7 +61,7 @@ fn batched_compositor_matches_the_scalar_reference() {
         .map(|_| vec![0.0; st.thumbs.pixels() * 3])
         .collect();
     composite(&st.thumbs, &w, &mut outs, |v| v);
-    let bytes = visobjd::render::render_srgb8(&st.thumbs, &refs, gain);
+    let bytes = visobjd_compositor::render::render_srgb8(&st.thumbs, &refs, gain);
     for (k, look) in looks.iter().enumerate() {
         let want = render_reference(&st.thumbs, look, gain);
         for (i, (a, b)) in outs[k].iter().zip(&want).enumerate() {
@@ -73,7 +73,7 @@ fn batched_compositor_matches_the_scalar_reference() {
     }
 }
 
-fn generate(st: &Stage, seed: u64, count: usize, clusters: usize) -> visobjd::gallery::Generation {
+fn generate(st: &Stage, seed: u64, count: usize, clusters: usize) -> visobjd_method::gallery::Generation {
     let base = Look::off(st.scene.lights.len());
     st.generate(
         &GenerateRequest {
@@ -148,7 +148,7 @@ fn a_gallery_of_identical_candidates_runs_out_of_draws_and_says_so() {
     );
     assert!(g.exhausted);
     assert_eq!(g.candidates.len(), 1);
-    assert_eq!(g.draws, 10 * visobjd::gallery::DRAWS_PER_CANDIDATE);
+    assert_eq!(g.draws, 10 * visobjd_method::gallery::DRAWS_PER_CANDIDATE);
     let rejections = (g.draws - 1) as f32;
     assert!((g.threshold - 20.0 / (1.0 + 0.1 * rejections)).abs() < 1e-4);
 }

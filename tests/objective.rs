@@ -1,7 +1,7 @@
 //! Reference statistics on images with known answers.
 
-use visobjd::color::srgb_to_lab;
-use visobjd::objective::{Region, analyze};
+use visobjd_compositor::color::srgb_to_lab;
+use visobjd_method::objective::{Region, analyze};
 
 fn image(w: u32, h: u32, f: impl Fn(u32, u32) -> [u8; 3]) -> image::RgbImage {
     image::RgbImage::from_fn(w, h, |x, y| image::Rgb(f(x, y)))

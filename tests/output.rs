@@ -8,10 +8,10 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use visobjd::dmx::Patch;
-use visobjd::look::{Level, Look};
-use visobjd::output::{ArtnetDest, Output, OutputConfig, SacnDest};
-use visobjd::scene::Scene;
+use visobjd_dmx::Patch;
+use visobjd_scene::look::{Level, Look};
+use visobjd_dmx::{ArtnetDest, Output, OutputConfig, SacnDest};
+use visobjd_scene::Scene;
 
 mod common;
 

@@ -6,9 +6,9 @@ mod common;
 use rand::SeedableRng;
 use rand::rngs::Xoshiro256PlusPlus as Rng;
 use rand_distr::{Distribution, Normal};
-use visobjd::look::{Level, Look};
-use visobjd::objective::{Aspects, PaletteColor, Region};
-use visobjd::sampler::{Constraints, Keys, Plan, Rig, Spread, Target, gibbs, key_count};
+use visobjd_scene::look::{Level, Look};
+use visobjd_method::objective::{Aspects, PaletteColor, Region};
+use visobjd_method::sampler::{Constraints, Keys, Plan, Rig, Spread, Target, gibbs, key_count};
 
 fn mean(v: &[f32]) -> f32 {
     v.iter().sum::<f32>() / v.len() as f32
@@ -273,10 +273,10 @@ fn colours_follow_their_weights_and_dimmers_stay_white() {
 
 #[test]
 fn palette_colours_take_full_value() {
-    let c = visobjd::sampler::full_value([0.2, 0.1, 0.05]);
+    let c = visobjd_method::sampler::full_value([0.2, 0.1, 0.05]);
     assert!((c[0] - 1.0).abs() < 1e-6, "{c:?}");
     assert!(c[1] < 1.0 && c[2] < c[1]);
-    assert_eq!(visobjd::sampler::full_value([0.0; 3]), [1.0; 3]);
+    assert_eq!(visobjd_method::sampler::full_value([0.0; 3]), [1.0; 3]);
 }
 
 #[test]
@@ -365,7 +365,7 @@ fn region_targeting_selects_exactly_the_expected_lights() {
         },
     ];
     write_scene(&dir, 40, 20, &[], &lights);
-    let stage = visobjd::stage::Stage::load(&dir, 40).unwrap();
+    let stage = visobjd_method::stage::Stage::load(&dir, 40).unwrap();
     let selected = stage
         .footprints
         .select(Region::new(0.0, 0.0, 0.25, 1.0).unwrap());

@@ -2,7 +2,7 @@
 
 use std::path::{Path, PathBuf};
 
-use visobjd::synth::{Rig, SynthError, render_light, synth};
+use visobjd_synth::{Rig, SynthError, render_light, synth};
 
 /// A 32x18 view looking almost straight down at the floor point (0, 0, 4).
 const BASE: &str = r#"

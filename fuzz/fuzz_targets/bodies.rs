@@ -2,7 +2,7 @@
 //! `tests/fuzz_corpus.rs`, which replays the committed corpus and every crash found so far
 //! under `cargo test`.
 
-use visobjd::objective::{Region, analyze, decode_reference_bytes};
+use visobjd_method::objective::{Region, analyze, decode_reference_bytes};
 use visobjd::osc::framing::{Decoder, Frame, HEAD, encode};
 
 /// One UDP datagram (or stream frame) through the daemon's parsing: packet decoding with
@@ -68,7 +68,7 @@ pub fn config_toml(data: &[u8]) {
 /// the patch). No basis image is read. Must never panic.
 pub fn scene_toml(data: &[u8]) {
     if let Ok(text) = std::str::from_utf8(data) {
-        let _ = visobjd::scene::Scene::parse(std::path::Path::new("/fuzz/scene"), text);
+        let _ = visobjd_scene::Scene::parse(std::path::Path::new("/fuzz/scene"), text);
     }
 }
 

@@ -8,12 +8,12 @@ use std::time::{Duration, Instant};
 use anyhow::Context;
 use rand::{RngExt, SeedableRng};
 
-use crate::look::{Level, Look};
-use crate::objective::{Aspects, Objective, Region, analyze, decode_reference};
-use crate::output::{Output, OutputConfig, SacnDest};
-use crate::render::{Kernel, composite_clamped, composite_srgb8, weights};
-use crate::sampler::{Constraints, Spread};
-use crate::stage::{GenerateRequest, Stage, THUMB_WIDTH};
+use visobjd_scene::look::{Level, Look};
+use visobjd_method::objective::{Aspects, Objective, Region, analyze, decode_reference};
+use visobjd_dmx::{Output, OutputConfig, SacnDest};
+use visobjd_compositor::render::{Kernel, composite_clamped, composite_srgb8, weights};
+use visobjd_method::sampler::{Constraints, Spread};
+use visobjd_method::stage::{GenerateRequest, Stage, THUMB_WIDTH};
 
 /// Arguments of `bench`.
 #[derive(clap::Args)]
@@ -571,7 +571,7 @@ fn dmx_p99(
         ..OutputConfig::default()
     };
     let period = 1000.0 / f64::from(config.rate_hz);
-    let patch = crate::dmx::patch::Patch::new(&stage.scene);
+    let patch = visobjd_dmx::patch::Patch::new(&stage.scene);
     let output = Output::start(&config, patch, dir, Look::off(stage.scene.lights.len()))?;
     let stop = std::sync::atomic::AtomicBool::new(false);
     let arrivals = std::thread::scope(|s| {
@@ -586,7 +586,7 @@ fn dmx_p99(
                 {
                     // The kernel's receive time: this thread competes for the cores with
                     // the generates, and its own lateness is not the sender's.
-                    arrivals.push(crate::output::kernel_arrival(&receiver, Instant::now()));
+                    arrivals.push(visobjd_dmx::kernel_arrival(&receiver, Instant::now()));
                 }
             }
             arrivals

@@ -5,8 +5,8 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use crate::config::Config;
-use crate::dmx::Patch;
-use crate::stage::{Stage, THUMB_WIDTH};
+use visobjd_dmx::Patch;
+use visobjd_method::stage::{Stage, THUMB_WIDTH};
 
 /// Arguments of `check`.
 #[derive(clap::Args)]

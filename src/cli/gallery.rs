@@ -7,12 +7,12 @@ use clap::ArgMatches;
 use rand::SeedableRng;
 use serde::Serialize;
 
-use crate::gallery::Generation;
-use crate::look::{LightEntry, LookFile, entries};
-use crate::objective::{Aspects, Objective, ObjectiveRecord, Region, analyze, decode_reference};
-use crate::sampler::{Constraints, Spread};
-use crate::sheet::contact_sheet;
-use crate::stage::{GenerateRequest, Stage, THUMB_WIDTH};
+use visobjd_method::gallery::Generation;
+use visobjd_scene::look::{LightEntry, LookFile, entries};
+use visobjd_method::objective::{Aspects, Objective, ObjectiveRecord, Region, analyze, decode_reference};
+use visobjd_method::sampler::{Constraints, Spread};
+use visobjd_method::sheet::contact_sheet;
+use visobjd_method::stage::{GenerateRequest, Stage, THUMB_WIDTH};
 
 /// Arguments of `gallery`. `--aspects`, `--region` and `--crop` apply to the `--ref`
 /// before them (or, given before any `--ref`, to the first).
@@ -110,7 +110,7 @@ pub fn run(args: Args, matches: &ArgMatches) -> anyhow::Result<()> {
 
     let base = match &args.base {
         Some(path) => read_look(path, &stage)?,
-        None => crate::look::Look::off(stage.scene.lights.len()),
+        None => visobjd_scene::look::Look::off(stage.scene.lights.len()),
     };
     let mut constraints = Constraints::none(&stage.rig);
     constraints.per_light = args.per_light;
@@ -162,7 +162,7 @@ pub fn run(args: Args, matches: &ArgMatches) -> anyhow::Result<()> {
 }
 
 /// Reads a look file for `stage`'s scene.
-pub fn read_look(path: &Path, stage: &Stage) -> anyhow::Result<crate::look::Look> {
+pub fn read_look(path: &Path, stage: &Stage) -> anyhow::Result<visobjd_scene::look::Look> {
     let text = std::fs::read_to_string(path)
         .with_context(|| format!("{}: cannot read", path.display()))?;
     let file: LookFile = serde_json::from_str(&text)

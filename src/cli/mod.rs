@@ -106,7 +106,7 @@ pub fn main() -> std::process::ExitCode {
         Command::Gallery(args) => gallery::run(args, sub),
         Command::Render(args) => render::run(args),
         Command::Check(args) => check::run(args),
-        Command::Synth { rig, out } => crate::synth::synth(&rig, &out)
+        Command::Synth { rig, out } => visobjd_synth::synth(&rig, &out)
             .map(|r| {
                 println!(
                     "synth: {} lights at {}x{} in {:.1} s -> {}",

@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 
-use crate::stage::Stage;
+use visobjd_method::stage::Stage;
 
 /// Arguments of `render`.
 #[derive(clap::Args)]

@@ -11,15 +11,15 @@ use std::sync::Arc;
 use anyhow::Context;
 
 use crate::config::Config;
-use crate::dmx::Patch;
+use visobjd_dmx::Patch;
 use crate::engine::persist::{Files, restore_live};
 use crate::engine::session::Session;
 use crate::engine::{Engine, EngineHandler};
-use crate::look::Look;
+use visobjd_scene::look::Look;
 use crate::osc::Server;
-use crate::output::Output;
-use crate::scene::Scene;
-use crate::stage::{Stage, THUMB_WIDTH};
+use visobjd_dmx::Output;
+use visobjd_scene::Scene;
+use visobjd_method::stage::{Stage, THUMB_WIDTH};
 
 /// Arguments of `run`.
 #[derive(clap::Args)]

@@ -8,7 +8,7 @@ use rosc::OscMessage;
 use super::{int, int_arg, text};
 use crate::engine::session::Change;
 use crate::engine::{Engine, msg};
-use crate::look::LookFile;
+use visobjd_scene::look::LookFile;
 use crate::osc::args::{self, Request};
 
 /// Largest look number (osc.md).

@@ -19,11 +19,11 @@ use std::sync::Arc;
 use rosc::{OscMessage, OscType};
 
 use crate::engine::Engine;
-use crate::look::Look;
+use visobjd_scene::look::Look;
 use crate::osc::Peer;
 use crate::osc::args::{self, Request};
 use crate::osc::packet::{self, Item, PacketError};
-use crate::scene::Scene;
+use visobjd_scene::Scene;
 
 /// Every command the daemon understands.
 enum Command {
@@ -206,7 +206,7 @@ fn light_args(scene: &Scene, look: &Look) -> Vec<OscType> {
         .collect()
 }
 
-fn one_light(channel: u32, lv: &crate::look::Level) -> [OscType; 5] {
+fn one_light(channel: u32, lv: &visobjd_scene::look::Level) -> [OscType; 5] {
     [
         OscType::Int(channel as i32),
         OscType::Float(lv.intensity),

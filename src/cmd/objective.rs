@@ -6,7 +6,7 @@ use rosc::{OscMessage, OscType};
 
 use super::{int, int_arg, num_arg, rgb_args, text};
 use crate::engine::{Engine, msg};
-use crate::objective::{Aspects, Objective, Region};
+use visobjd_method::objective::{Aspects, Objective, Region};
 use crate::osc::args::{self, Request};
 
 pub enum Cmd {

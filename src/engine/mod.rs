@@ -21,13 +21,13 @@ use rosc::{OscMessage, OscType};
 
 use crate::cmd;
 use crate::config::Config;
-use crate::look::Look;
-use crate::look::LookFile;
-use crate::objective::{Objective, decode_reference};
+use visobjd_scene::look::Look;
+use visobjd_scene::look::LookFile;
+use visobjd_method::objective::{Objective, decode_reference};
 use crate::osc::{Handler, Peer, Sender};
-use crate::output::{Output, OutputStats};
-use crate::sampler::Spread;
-use crate::stage::{GenerateRequest, Stage};
+use visobjd_dmx::{Output, OutputStats};
+use visobjd_method::sampler::Spread;
+use visobjd_method::stage::{GenerateRequest, Stage};
 use persist::{Files, Snapshot, Writer};
 use session::{Gallery, Session};
 
@@ -226,17 +226,17 @@ impl Engine {
     pub fn load_reference(
         &self,
         name: &str,
-        aspects: crate::objective::Aspects,
+        aspects: visobjd_method::objective::Aspects,
     ) -> Result<Objective, String> {
         let path = resolve_reference(&self.references, name)?;
         let img = decode_reference(&path).map_err(|e| format!("{name} {e}"))?;
         Ok(Objective {
             image: name.to_string(),
             aspects,
-            region: crate::objective::Region::FULL,
-            analysis: crate::objective::analyze(
+            region: visobjd_method::objective::Region::FULL,
+            analysis: visobjd_method::objective::analyze(
                 &img,
-                crate::objective::Region::FULL,
+                visobjd_method::objective::Region::FULL,
                 self.palette_size,
             ),
         })
@@ -248,7 +248,7 @@ impl Engine {
     pub fn add_objective(
         &self,
         image: &str,
-        aspects: crate::objective::Aspects,
+        aspects: visobjd_method::objective::Aspects,
     ) -> Result<OscMessage, String> {
         let objective = {
             let _one_at_a_time = self.reading.lock().unwrap_or_else(|p| p.into_inner());
@@ -612,7 +612,7 @@ pub fn error(addr: &str, message: &str) -> OscMessage {
 
 /// The file `name` inside `references`, refusing anything that leads outside it.
 pub fn resolve_reference(references: &Path, name: &str) -> Result<PathBuf, String> {
-    let relative = crate::scene::safe_relative(name).ok_or_else(|| {
+    let relative = visobjd_scene::safe_relative(name).ok_or_else(|| {
         format!("image `{name}` must be a file name inside the references folder (no absolute paths, no ..)")
     })?;
     let root = references.canonicalize().map_err(|e| {

@@ -15,10 +15,10 @@ use std::time::Duration;
 use serde::{Deserialize, Serialize};
 
 use super::session::{Entry, Session};
-use crate::look::LookFile;
-use crate::objective::ObjectiveRecord;
-use crate::scene::Scene;
-use crate::state::{Loaded, load_json, save_json};
+use visobjd_scene::look::LookFile;
+use visobjd_method::objective::ObjectiveRecord;
+use visobjd_scene::Scene;
+use visobjd_files::{Loaded, load_json, save_json};
 
 /// `live.json`: what the stage shows.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -135,7 +135,7 @@ fn partly_restored(path: &Path, lost: &[String]) {
     for what in lost {
         tracing::error!("{}: not restored: {what}", path.display());
     }
-    match crate::state::keep_copy(path) {
+    match visobjd_files::keep_copy(path) {
         Ok(aside) => tracing::error!(
             "{}: kept the file as it was in {}",
             path.display(),

@@ -4,11 +4,11 @@
 
 use std::collections::BTreeMap;
 
-use crate::gallery::Generation;
-use crate::look::{Look, LookFile};
-use crate::objective::Objective;
-use crate::sampler::Constraints;
-use crate::scene::Scene;
+use visobjd_method::gallery::Generation;
+use visobjd_scene::look::{Look, LookFile};
+use visobjd_method::objective::Objective;
+use visobjd_method::sampler::Constraints;
+use visobjd_scene::Scene;
 
 /// Base looks kept for undo (osc.md asks for at least 32).
 pub const HISTORY: usize = 64;

@@ -806,7 +806,7 @@ impl Wire {
                             log.lock().expect("log").idle.insert(proto, Instant::now());
                             continue;
                         };
-                        let at = visobjd::output::kernel_arrival(&sock, Instant::now());
+                        let at = visobjd_dmx::kernel_arrival(&sock, Instant::now());
                         let p = buf[..n].to_vec();
                         let got = std::panic::catch_unwind(|| decode(proto, &p, at));
                         let mut log = log.lock().expect("log");

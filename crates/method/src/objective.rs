@@ -10,7 +10,8 @@ use std::path::Path;
 use rand::{Rng, RngExt, SeedableRng};
 use serde::{Deserialize, Serialize};
 
-use crate::color::{delta_e, linear_to_lab, linear_to_srgb, srgb8_to_linear_table};
+use visobjd_compositor::color::{delta_e, linear_to_lab, srgb8_to_linear_table};
+use visobjd_scene::srgb::linear_to_srgb;
 
 /// Longest side the reference is reduced to before statistics (algorithm.md).
 pub const ANALYSIS_SIDE: u32 = 256;

@@ -1,20 +1,8 @@
-//! Colour science shared by objectives, the compositor and the gallery: sRGB transfer
-//! functions and CIELAB (D65), so every stage measures colour the same way.
+//! Colour science shared by objectives, the compositor and the gallery: CIELAB (D65) and
+//! the fast sRGB encoders, so every stage measures colour the same way (the scalar sRGB
+//! transfer functions are the scene model's, [`visobjd_scene::srgb`]).
 
-/// sRGB-encoded value (0..1) to linear light.
-pub fn srgb_to_linear(v: f32) -> f32 {
-    if v <= 0.04045 {
-        v / 12.92
-    } else {
-        ((v + 0.055) / 1.055).powf(2.4)
-    }
-}
-
-/// Linear light (clamped to 0..1) to sRGB-encoded 0..1 (computed in f64, so full-value
-/// colours round-trip to exactly 1.0).
-pub fn linear_to_srgb(v: f32) -> f32 {
-    linear_to_srgb_f64(f64::from(v.clamp(0.0, 1.0))) as f32
-}
+use visobjd_scene::srgb::{linear_to_srgb_f64, srgb_to_linear};
 
 /// CIELAB (D65 white) of a linear-light RGB colour: L* in 0..100.
 pub fn linear_to_lab(rgb: [f32; 3]) -> [f32; 3] {
@@ -249,16 +237,6 @@ fn fixed_point(key: u32, table: &EncodeTable) -> [u32; 2] {
     let t = ((key << 5) | (key >> 11)) & 0xFFFF;
     let y1 = c1.wrapping_sub((t * n2) >> 16);
     [y1, c0.wrapping_add((t * y1) >> 16)]
-}
-
-/// The sRGB encoding in f64 (no clamp): [`linear_to_srgb`], and the reference the fast
-/// encoder is fitted and tested against.
-fn linear_to_srgb_f64(v: f64) -> f64 {
-    if v <= 0.003_130_8 {
-        12.92 * v
-    } else {
-        1.055 * v.powf(1.0 / 2.4) - 0.055
-    }
 }
 
 /// Coefficients (constant term first) of the polynomial through N points: Gauss-Jordan on
@@ -769,15 +747,10 @@ mod tests {
     }
 
     #[test]
-    fn srgb_round_trips() {
+    fn srgb8_round_trips() {
         for i in 0..=255 {
-            let v = i as f32 / 255.0;
-            assert!((linear_to_srgb(srgb_to_linear(v)) - v).abs() < 1e-5);
             assert_eq!(encode_srgb8(srgb8_to_linear_table()[i]), i as u8);
         }
-        assert_eq!(linear_to_srgb(1.0), 1.0);
-        assert_eq!(linear_to_srgb(3.0), 1.0);
-        assert_eq!(linear_to_srgb(-1.0), 0.0);
     }
 
     #[test]

@@ -21,7 +21,7 @@ pub(crate) fn load_or_create(state_dir: &Path) -> io::Result<Uuid> {
             if let Some(cid) = parsed {
                 return Ok(cid);
             }
-            crate::state::keep_aside(
+            visobjd_files::keep_aside(
                 &path,
                 "the sACN CID file does not hold a UUID; a new CID is made (receivers will see a new source)",
             )?;
@@ -30,7 +30,7 @@ pub(crate) fn load_or_create(state_dir: &Path) -> io::Result<Uuid> {
         Err(e) => return Err(e),
     }
     let cid = Uuid::new_v4();
-    crate::state::write_atomic(&path, format!("{}\n", cid.hyphenated()).as_bytes())?;
+    visobjd_files::write_atomic(&path, format!("{}\n", cid.hyphenated()).as_bytes())?;
     Ok(cid)
 }
 

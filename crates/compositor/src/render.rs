@@ -17,7 +17,7 @@ use rayon::prelude::*;
 
 use crate::basis::{BasisImages, Panel};
 use crate::color::encode_srgb8_planar;
-use crate::look::Look;
+use visobjd_scene::look::Look;
 
 /// Pixels per strip: six 16-lane AVX-512 vectors, the width of the register block.
 pub const STRIP: usize = 96;
@@ -913,7 +913,7 @@ pub fn render_reference(basis: &BasisImages, look: &Look, gain: f32) -> Vec<f32>
 mod tests {
     use super::*;
     use crate::basis::Precision;
-    use crate::look::Level;
+    use visobjd_scene::look::Level;
 
     /// 7 lights over a 37x11 image (pixels not a multiple of the strip), HDR values up to 4.
     fn planes() -> (usize, usize, usize, Vec<f32>) {

@@ -8,7 +8,7 @@ use rayon::prelude::*;
 
 use crate::render::STRIP;
 
-use crate::scene::{Scene, SceneError};
+use visobjd_scene::{Scene, SceneError};
 
 /// How basis samples are stored.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -354,7 +354,7 @@ fn weights_1d(n: usize, nn: usize) -> Vec<Vec<(usize, f32)>> {
 }
 
 /// One light's basis image, validated, as planar `[R, G, B]` (negatives clamped to 0).
-fn decode(light: &crate::scene::Light) -> Result<(usize, usize, [Vec<f32>; 3]), SceneError> {
+fn decode(light: &visobjd_scene::Light) -> Result<(usize, usize, [Vec<f32>; 3]), SceneError> {
     let fail = |message: String| SceneError::Basis {
         path: light.basis.clone(),
         message,

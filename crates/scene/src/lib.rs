@@ -2,14 +2,18 @@
 //!
 //! Parsing and validation live here so that `check`, the offline commands and the daemon
 //! all refuse the same broken scenes with the same messages. Basis images are loaded
-//! separately ([`crate::basis`]) because the daemon restores the stage before it reads them.
+//! separately (by the compositor crate's `basis`) because the daemon restores the stage before it reads them.
+
+pub mod look;
+pub mod profile;
+pub mod srgb;
 
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
-use crate::dmx::profile::Profile;
+use crate::profile::Profile;
 
 /// Why a scene did not load; each message names the file and the problem.
 #[derive(Debug, thiserror::Error)]

@@ -286,12 +286,12 @@ impl Rig {
                 ));
             }
             let Some(fp) =
-                crate::dmx::profile::Profile::built_in(&l.profile).map(|p| p.footprint() as u32)
+                visobjd_scene::profile::Profile::built_in(&l.profile).map(|p| p.footprint() as u32)
             else {
                 return bad(format!(
                     "{what}: unknown profile `{}` ({})",
                     l.profile,
-                    crate::dmx::profile::Profile::built_in_names()
+                    visobjd_scene::profile::Profile::built_in_names()
                         .collect::<Vec<_>>()
                         .join(", ")
                 ));

@@ -7,10 +7,10 @@
 use rand::Rng;
 use rayon::prelude::*;
 
-use crate::basis::BasisImages;
-use crate::color::linear_to_lab_planar;
-use crate::look::Look;
-use crate::render::{Kernel, STRIP, composite_with, weights, zeroed_outputs};
+use visobjd_compositor::basis::BasisImages;
+use visobjd_compositor::color::linear_to_lab_planar;
+use visobjd_scene::look::Look;
+use visobjd_compositor::render::{Kernel, STRIP, composite_with, weights, zeroed_outputs};
 use crate::sampler::Plan;
 
 /// Width of the proxy renders distances are measured on: "small", as algorithm.md asks (the

@@ -1,4 +1,6 @@
-//! DMX output: sACN and Art-Net senders on their own clock (dmx.md).
+//! DMX: how a look becomes slot values ([`patch`], through the scene's profiles), and the
+//! sACN and Art-Net senders on their own clock (dmx.md). It knows scenes and looks, never
+//! a session.
 //!
 //! The engine hands over the desired state through a `tokio::sync::watch` channel and
 //! never waits on the sender; a dedicated OS thread ticks at `rate_hz` with absolute
@@ -8,7 +10,10 @@
 
 mod cid;
 mod config;
+pub mod patch;
 mod wire;
+
+pub use patch::{Frame, Patch};
 
 pub use config::{ArtnetDest, OutputConfig, SacnDest};
 
@@ -24,8 +29,8 @@ use std::time::{Duration, Instant};
 use tokio::sync::watch;
 use uuid::Uuid;
 
-use crate::dmx::patch::{Frame, Patch, SLOTS};
-use crate::look::Look;
+use crate::patch::SLOTS;
+use visobjd_scene::look::Look;
 use config::SacnTarget;
 use wire::SacnSource;
 

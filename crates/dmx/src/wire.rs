@@ -10,7 +10,7 @@ use sacn::packet::{
 };
 use uuid::Uuid;
 
-use crate::dmx::patch::SLOTS;
+use crate::patch::SLOTS;
 
 /// What every sACN data packet of one destination shares.
 pub(crate) struct SacnSource<'a> {

@@ -1,6 +1,7 @@
 //! Lighting: direct light from a soft-edged spot with hard shadows, plus one diffuse bounce
 //! gathered from virtual point lights placed where the beam lands.
 
+use visobjd_scene::srgb::srgb_to_linear;
 use std::f32::consts::PI;
 
 use rayon::prelude::*;
@@ -208,14 +209,5 @@ impl Renderer {
                 })
             })
             .collect()
-    }
-}
-
-/// sRGB transfer function decode, for gel colours given as designers pick them.
-fn srgb_to_linear(v: f32) -> f32 {
-    if v <= 0.04045 {
-        v / 12.92
-    } else {
-        ((v + 0.055) / 1.055).powf(2.4)
     }
 }

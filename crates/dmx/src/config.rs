@@ -12,7 +12,7 @@ pub struct OutputConfig {
     /// DMX refresh rate, 1..=44 frames per second per universe.
     pub rate_hz: u32,
     /// Default crossfade in seconds when the live look changes (the engine passes it to
-    /// [`crate::output::Output::set_look`]).
+    /// [`crate::Output::set_look`]).
     pub fade_s: f32,
     /// Unchanged universes drop to a keep-alive: three repeats, then once a second.
     pub idle_keepalive: bool,

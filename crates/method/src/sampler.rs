@@ -10,8 +10,9 @@ use rand::Rng;
 use rand::seq::SliceRandom;
 use rand_distr::{Distribution, Normal};
 
-use crate::color::{linear_to_srgb, srgb_to_lab, srgb_to_linear};
-use crate::look::Look;
+use visobjd_compositor::color::srgb_to_lab;
+use visobjd_scene::srgb::{linear_to_srgb, srgb_to_linear};
+use visobjd_scene::look::Look;
 use crate::objective::{Aspects, PaletteColor, nearest};
 
 /// The rig as the sampler sees it.
@@ -25,7 +26,7 @@ pub struct Rig {
 
 impl Rig {
     /// The sampler's view of a scene.
-    pub fn new(scene: &crate::scene::Scene) -> Rig {
+    pub fn new(scene: &visobjd_scene::Scene) -> Rig {
         Rig {
             groups: scene.groups.iter().map(|g| g.lights.clone()).collect(),
             colored: (0..scene.lights.len())

@@ -3,13 +3,13 @@
 
 use std::path::Path;
 
-use crate::basis::{self, BasisImages, Precision};
+use visobjd_compositor::basis::{self, BasisImages, Precision};
 use crate::gallery::{Generation, PROXY_WIDTH, Size};
-use crate::look::Look;
+use visobjd_scene::look::Look;
 use crate::objective::Objective;
-use crate::render::{exposure_gain, render_srgb8};
+use visobjd_compositor::render::{exposure_gain, render_srgb8};
 use crate::sampler::{Constraints, Plan, Rig, Spread, Target};
-use crate::scene::{Scene, SceneError};
+use visobjd_scene::{Scene, SceneError};
 use crate::targeting::{Footprints, WORKING_WIDTH};
 
 /// Default thumbnail width: the paper's gallery thumbnails are 480 px wide.

@@ -5,7 +5,7 @@
 
 use rayon::prelude::*;
 
-use crate::basis::BasisImages;
+use visobjd_compositor::basis::BasisImages;
 use crate::objective::Region;
 
 /// Width the footprints are analysed at (algorithm.md: "such as 128 px wide").

@@ -1,0 +1,12 @@
+//! The compositor: a look relights the scene's basis images (the paper's 5.1), on the CPU,
+//! fast enough that a whole gallery renders while a designer waits.
+//!
+//! - [`basis`]: the per-light HDR images, loaded once in the layout the kernels stream;
+//! - [`render`]: the kernels (AVX-512 where the CPU has it, a portable path elsewhere);
+//! - [`color`]: CIELAB and the fast sRGB encoders the thumbnails and the gallery use.
+//!
+//! Pure computation: no transport, no files but the basis images it is asked to read.
+
+pub mod basis;
+pub mod color;
+pub mod render;
