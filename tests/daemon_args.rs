@@ -216,7 +216,9 @@ fn replies_carry_the_contract_types() {
             .collect()
     };
     let r = d.ok("/vo/status", vec![], "/vo/status");
-    assert_eq!(tags(&r), "siiiiifif", "{r:?}");
+    // The session, the output's health, and a label and count per destination (one sACN,
+    // one Art-Net).
+    assert_eq!(tags(&r), format!("siiiiifif{}{}", "fii", "si".repeat(2)), "{r:?}");
     let r = d.ok(
         "/vo/objective/add",
         vec![string("grey.png")],
