@@ -1,4 +1,4 @@
-//! DMX output: sACN and Art-Net senders on their own clock (dmx.md).
+//! DMX output: sACN and Art-Net senders on their own clock (docs/dmx.md).
 //!
 //! The engine hands over the desired state through a `tokio::sync::watch` channel and
 //! never waits on the sender; a dedicated OS thread ticks at `rate_hz` with absolute
