@@ -1,4 +1,4 @@
-//! `config/visobjd.toml` (config.md): every key has a default, unknown keys are an error
+//! `config/visobjd.toml` (docs/config.md): every key has a default, unknown keys are an error
 //! naming the key and line, and relative paths are relative to the config file's folder.
 
 use std::net::{IpAddr, SocketAddr};
@@ -86,7 +86,7 @@ impl Default for OscConfig {
     }
 }
 
-/// The `[http]` section: the web gallery (README, "The web gallery").
+/// The `[http]` section: the web gallery (docs/web.md).
 #[derive(Debug, Clone, PartialEq, Default, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct HttpConfig {

@@ -4,8 +4,8 @@
 //! A `.tosc` file is zlib-compressed XML: `<lexml version='3'>` holding one root `GROUP`
 //! node; every node has `<properties>` (name, frame, colour, ...), `<values>` (`x`, `touch`,
 //! a label's `text`), `<messages>` (`<osc>` with triggers, a path and arguments made of
-//! `<partial>`s) and `<children>`. Three pages: objectives, gallery, looks (README,
-//! "TouchOSC").
+//! `<partial>`s) and `<children>`. Three pages: objectives, gallery, looks
+//! (docs/touchosc.md).
 
 use std::fmt::Write as _;
 use std::io::Write as _;
@@ -91,7 +91,7 @@ pub struct Message {
 }
 
 impl Message {
-    /// A button press: `path args...` on touch-down, nothing on release (osc.md buttons).
+    /// A button press: `path args...` on touch-down, nothing on release (docs/osc.md, buttons).
     fn press(path: &str, arguments: Vec<Partial>) -> Message {
         Message {
             path: path.to_string(),

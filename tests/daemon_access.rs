@@ -1,4 +1,4 @@
-//! The allow-list (osc.md, README threat model) against the real daemon. Loopback has all
+//! The allow-list (docs/osc.md, docs/security.md) against the real daemon. Loopback has all
 //! of 127.0.0.0/8 and ::1, so a config that admits 127.0.0.2 (or ::1) and not 127.0.0.1
 //! gives an allowed and a refused sender on one machine. Refused senders get nothing back
 //! (no amplification), change nothing, and are counted in the log at most once per 10 s.

@@ -1,4 +1,4 @@
-//! The argument rules and transports of osc.md against the real daemon: number forms, path
+//! The argument rules and transports of docs/osc.md against the real daemon: number forms, path
 //! arguments, case, button releases, bundles, unknown addresses, non-OSC input, TCP with
 //! both framings, reply types, and `visobjd send`.
 
@@ -200,7 +200,7 @@ fn tcp_slip() {
     over_tcp(Framing::Slip);
 }
 
-/// The type tags osc.md gives (`:i` int32, `:f` float32, `:s` string).
+/// The type tags docs/osc.md gives (`:i` int32, `:f` float32, `:s` string).
 #[test]
 fn replies_carry_the_contract_types() {
     let mut d = Daemon::start("args-types");
@@ -216,7 +216,9 @@ fn replies_carry_the_contract_types() {
             .collect()
     };
     let r = d.ok("/vo/status", vec![], "/vo/status");
-    assert_eq!(tags(&r), "siiiiifif", "{r:?}");
+    // The session, the output's health, and a label and count per destination (one sACN,
+    // one Art-Net).
+    assert_eq!(tags(&r), format!("siiiiifif{}{}", "fii", "si".repeat(2)), "{r:?}");
     let r = d.ok(
         "/vo/objective/add",
         vec![string("grey.png")],

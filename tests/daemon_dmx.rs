@@ -1,4 +1,4 @@
-//! What the real daemon puts on the wire (dmx.md), received on loopback and decoded
+//! What the real daemon puts on the wire (docs/dmx.md), received on loopback and decoded
 //! independently: picks land as the candidate's values through each profile, fades take
 //! their time, frames never stop (idle, during a generate, during a flood), a kill -9
 //! restarts into the same look, and SIGTERM terminates every sACN universe.

@@ -1,4 +1,4 @@
-//! Generate, the gallery, pick/next/prev, undo/redo and the constraints of osc.md against
+//! Generate, the gallery, pick/next/prev, undo/redo and the constraints of docs/osc.md against
 //! the real daemon, each with refused cases that change nothing.
 
 mod common;

@@ -1,7 +1,7 @@
 //! Hostile input against the real daemon: broken, oversized and too-deep packets,
 //! non-finite and out-of-range numbers, unknown names, references that lead out of the
 //! folder or are not what they claim, a decompression bomb. Every message gets one
-//! `/vo/error` (non-OSC garbage gets nothing, osc.md), nothing changes, the daemon keeps
+//! `/vo/error` (non-OSC garbage gets nothing, docs/osc.md), nothing changes, the daemon keeps
 //! answering, and DMX goes on with no gap over two frame periods throughout. Cases already
 //! in daemon_args.rs and daemon_objectives.rs are not repeated here.
 

@@ -1,4 +1,4 @@
-//! The live look, status and feedback addresses of osc.md against the real daemon: each with
+//! The live look, status and feedback addresses of docs/osc.md against the real daemon: each with
 //! a success and a refused case that changes nothing.
 
 mod common;
@@ -295,7 +295,7 @@ fn subscribe_sends_the_state_then_changes() {
 #[test]
 fn eos_preset_without_a_console_is_refused() {
     let mut d = Daemon::start("live-eos");
-    // config.md configures no Eos console: nothing to push to.
+    // docs/config.md: no Eos console by default: nothing to push to.
     d.refused("/vo/eos/preset", vec![int(1)]);
     d.refused("/vo/eos/preset", vec![string("one")]);
     d.refused("/vo/eos/preset", vec![]);

@@ -242,7 +242,7 @@ fn load(name: &str, flood: Flood, secs: u64, rate: u64, tcp: usize) -> Report {
 }
 
 impl Report {
-    /// One paragraph for the log (and the README's figures).
+    /// One paragraph for the log (and the figures in docs/reliability.md).
     fn summary(&self) -> String {
         format!(
             "UDP flood: {} messages sent. Well-behaved pings: {} sent, {} lost, p50 {:?}, p99 {:?}, worst {:?}. TCP: {} clients still open at the end, {} reply bytes to the pinging ones. RSS: {} KiB before, {} KiB peak, {} KiB after. DMX: {:.2} frames/s per universe and protocol, worst gap {:?}.",

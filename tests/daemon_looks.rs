@@ -1,4 +1,4 @@
-//! Saved looks of osc.md against the real daemon: save, recall, delete and the listing,
+//! Saved looks of docs/osc.md against the real daemon: save, recall, delete and the listing,
 //! refused cases that change nothing, and what survives a kill -9.
 
 mod common;

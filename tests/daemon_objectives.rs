@@ -1,4 +1,4 @@
-//! Objective addresses of osc.md against the real daemon: add (with the L* statistics),
+//! Objective addresses of docs/osc.md against the real daemon: add (with the L* statistics),
 //! aspects, region, palette, colour, remove, clear and the listing, each with refused cases
 //! that change nothing, and hostile image paths.
 

@@ -1,7 +1,7 @@
-//! The shipped TouchOSC layout against the daemon and the README, both ways: every address
+//! The shipped TouchOSC layout against the daemon and the docs, both ways: every address
 //! the layout sends is one the real daemon knows (and takes with the layout's arguments),
-//! every address it listens to is a documented push, and every address of the README's
-//! OSC reference is on the tablet unless the README says it is not.
+//! every address it listens to is a documented push, and every address of docs/osc.md is
+//! on the tablet unless docs/touchosc.md says it is not.
 
 mod common;
 
@@ -108,7 +108,7 @@ fn shipped() -> Vec<u8> {
         .expect("touchosc/visobjd.tosc is in the repository")
 }
 
-/// The address without trailing numeric segments (they are arguments, osc.md).
+/// The address without trailing numeric segments (they are arguments, docs/osc.md).
 fn stem(path: &str) -> String {
     let mut segs: Vec<&str> = path.split('/').filter(|s| !s.is_empty()).collect();
     while segs.last().is_some_and(|s| s.parse::<f64>().is_ok()) {
@@ -117,7 +117,7 @@ fn stem(path: &str) -> String {
     format!("/{}", segs.join("/"))
 }
 
-/// Whether a README pattern (`<id>` stands for any one segment) names `path`.
+/// Whether a docs pattern (`<id>` stands for any one segment) names `path`.
 fn names(pattern: &str, path: &str) -> bool {
     let p: Vec<&str> = pattern.split('/').collect();
     let a: Vec<&str> = path.split('/').collect();
@@ -148,13 +148,13 @@ fn table_addresses(text: &str) -> Vec<String> {
     out
 }
 
-/// The README's text between the heading `from` and the next heading of its level or above.
-fn section<'a>(readme: &'a str, from: &str) -> &'a str {
-    let start = readme
+/// A page's text between the heading `from` and the next heading of its level or above.
+fn section<'a>(page: &'a str, from: &str) -> &'a str {
+    let start = page
         .find(from)
-        .unwrap_or_else(|| panic!("README has {from}"));
+        .unwrap_or_else(|| panic!("the page has {from}"));
     let level = from.chars().take_while(|&c| c == '#').count();
-    let rest = &readme[start + from.len()..];
+    let rest = &page[start + from.len()..];
     let end = rest
         .match_indices("\n#")
         .find(|(i, _)| {
@@ -165,9 +165,12 @@ fn section<'a>(readme: &'a str, from: &str) -> &'a str {
     &rest[..end]
 }
 
-fn readme() -> String {
-    std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("README.md"))
-        .expect("README.md")
+/// A page of the reference, `docs/<name>`.
+fn doc(name: &str) -> String {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("docs")
+        .join(name);
+    std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
 
 #[test]
@@ -319,22 +322,21 @@ fn every_layout_address_is_one_the_daemon_takes() {
 }
 
 #[test]
-fn the_readme_osc_reference_and_the_layout_agree_both_ways() {
-    let readme = readme();
-    let reference = section(&readme, "## OSC reference");
-    // The command table: the reference up to its first subsection.
-    let commands = table_addresses(reference.split("\n### ").next().unwrap_or_default());
+fn the_osc_reference_and_the_layout_agree_both_ways() {
+    let osc = doc("osc.md");
+    // The command tables: every table of the Addresses section.
+    let commands = table_addresses(section(&osc, "## Addresses"));
     assert!(commands.len() > 30, "{commands:?}");
-    let pushes = table_addresses(section(&readme, "### Pushed to subscribers"));
+    let pushes = table_addresses(section(&osc, "## Pushed to subscribers"));
     assert!(
         pushes.contains(&"/vo/entry/<k>/lit".to_string()),
         "{pushes:?}"
     );
-    let tablet = section(&readme, "## The TouchOSC layout");
+    let tablet = doc("touchosc.md");
     let excluded: Vec<String> = tablet
         .lines()
         .find(|l| l.starts_with("Not on the tablet"))
-        .expect("README says which addresses are not on the tablet")
+        .expect("docs/touchosc.md says which addresses are not on the tablet")
         .split('`')
         .skip(1)
         .step_by(2)

@@ -1,4 +1,4 @@
-//! The command line (cli.md): argument parsing and one module per subcommand.
+//! The command line (docs/cli.md): argument parsing and one module per subcommand.
 
 mod bench;
 mod check;

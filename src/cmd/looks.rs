@@ -11,7 +11,7 @@ use crate::engine::{Engine, msg};
 use visobjd_scene::look::LookFile;
 use crate::osc::args::{self, Request};
 
-/// Largest look number (osc.md).
+/// Largest look number (docs/osc.md).
 const MAX_LOOK: i64 = 9999;
 
 pub enum Cmd {

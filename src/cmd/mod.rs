@@ -1,4 +1,4 @@
-//! The OSC address space (osc.md) as commands: each family of addresses is one file with
+//! The OSC address space (docs/osc.md) as commands: each family of addresses is one file with
 //! a `Cmd` enum, its `parse` (syntax: types and ranges) and its `apply` (against the
 //! engine: existence, state changes, replies). Adding an address touches its family's
 //! file and one arm here at most.

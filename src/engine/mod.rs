@@ -31,7 +31,7 @@ use visobjd_method::stage::{GenerateRequest, Stage};
 use persist::{Files, Snapshot, Writer};
 use session::{Gallery, Session};
 
-/// How long a subscription lasts without a message from its subscriber (osc.md).
+/// How long a subscription lasts without a message from its subscriber (docs/osc.md).
 const SUBSCRIPTION: Duration = Duration::from_secs(600);
 
 /// A client that asked for state changes.

@@ -10,7 +10,7 @@ use visobjd_method::objective::Objective;
 use visobjd_method::sampler::Constraints;
 use visobjd_scene::Scene;
 
-/// Base looks kept for undo (osc.md asks for at least 32).
+/// Base looks kept for undo (docs/osc.md; at least 32 were asked for).
 pub const HISTORY: usize = 64;
 
 /// An objective with the id OSC addresses use.

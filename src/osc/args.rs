@@ -1,4 +1,4 @@
-//! The argument rules of osc.md as small pure functions, so every address reads its
+//! The argument rules of docs/osc.md as small pure functions, so every address reads its
 //! arguments the same way and refuses them with the same kind of sentence.
 //!
 //! - Numbers arrive as int32, int64, float32, float64 or (Eos) a string that parses as one.
@@ -8,7 +8,7 @@
 
 use rosc::{OscMessage, OscType};
 
-/// The addresses that take no argument (osc.md), as [`Request::matches`] patterns: a
+/// The addresses that take no argument (docs/osc.md), as [`Request::matches`] patterns: a
 /// single numeric 0 sent to one of these is a button release.
 pub const TRIGGERS: &[&str] = &[
     "/vo/generate",

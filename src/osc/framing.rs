@@ -1,7 +1,7 @@
 //! OSC over a byte stream (TCP): SLIP (OSC 1.1) and 32-bit length prefix (OSC 1.0).
 //!
-//! Ours rather than rosc's: rosc 0.11 has no SLIP, and its TCP decoder mis-measures frames
-//! (notes/crates.md). The first byte of a stream picks the framing: 0xC0 (SLIP END) means
+//! Ours rather than rosc's: rosc 0.11 has no SLIP, and its TCP decoder mis-measures frames.
+//! The first byte of a stream picks the framing: 0xC0 (SLIP END) means
 //! SLIP, anything else is a big-endian length prefix (whose first byte is 0 for any frame we
 //! accept). Memory per connection is bounded by the frame limit: a larger frame is
 //! reported by its first bytes and skipped, so its sender can be told why.

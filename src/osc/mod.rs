@@ -1,4 +1,4 @@
-//! OSC transport (osc.md): sockets, framing, the argument rules, and the handler the engine
+//! OSC transport (docs/osc.md): sockets, framing, the argument rules, and the handler the engine
 //! implements. The address space itself is the engine's.
 //!
 //! Wiring, inside the daemon's tokio runtime:

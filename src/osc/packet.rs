@@ -1,6 +1,6 @@
 //! One received packet (a datagram or a stream frame) to the messages it carries.
 //!
-//! Bundles are flattened in order and run at once (time tags are not scheduled, osc.md).
+//! Bundles are flattened in order and run at once (time tags are not scheduled, docs/osc.md).
 //! The raw bytes are checked for nesting before rosc sees them: rosc decodes bundles
 //! recursively and nested arrays drop recursively, so a small hostile packet could otherwise
 //! exhaust the stack.

@@ -1,11 +1,11 @@
-//! The `[output]` section of the config file (config.md), with its defaults and checks.
+//! The `[output]` section of the config file (docs/config.md), with its defaults and checks.
 
 use std::net::{IpAddr, Ipv4Addr, SocketAddr};
 
 use serde::Deserialize;
 
 /// Where and how fast DMX goes out. Embedded as `[output]` by the config loader; every
-/// key has the default config.md lists.
+/// key has the default docs/config.md lists.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct OutputConfig {

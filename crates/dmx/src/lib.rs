@@ -1,6 +1,6 @@
 //! DMX: how a look becomes slot values ([`patch`], through the scene's profiles), and the
-//! sACN and Art-Net senders on their own clock (dmx.md). It knows scenes and looks, never
-//! a session.
+//! sACN and Art-Net senders on their own clock (docs/dmx.md). It knows scenes and looks,
+//! never a session.
 //!
 //! The engine hands over the desired state through a `tokio::sync::watch` channel and
 //! never waits on the sender; a dedicated OS thread ticks at `rate_hz` with absolute

@@ -13,7 +13,7 @@ use visobjd_scene::look::Look;
 use visobjd_compositor::render::{Kernel, STRIP, composite_with, weights, zeroed_outputs};
 use crate::sampler::Plan;
 
-/// Width of the proxy renders distances are measured on: "small", as algorithm.md asks (the
+/// Width of the proxy renders distances are measured on: "small", as docs/method.md says (the
 /// prototype's were 100x100). 96 x 54 on a 16:9 stage has a third fewer pixels to render,
 /// convert and compare than 120 px wide, and the gallery phase of a generate takes about
 /// two thirds of the time.
@@ -34,7 +34,7 @@ pub enum Decision {
     Accepted(usize),
 }
 
-/// The streaming clustering state (algorithm.md, "Gallery").
+/// The streaming clustering state (docs/method.md, "Gallery").
 #[derive(Debug, Clone)]
 pub struct Clustering {
     clusters: usize,

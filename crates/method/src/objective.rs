@@ -13,9 +13,9 @@ use serde::{Deserialize, Serialize};
 use visobjd_compositor::color::{delta_e, linear_to_lab, srgb8_to_linear_table};
 use visobjd_scene::srgb::linear_to_srgb;
 
-/// Longest side the reference is reduced to before statistics (algorithm.md).
+/// Longest side the reference is reduced to before statistics (docs/method.md).
 pub const ANALYSIS_SIDE: u32 = 256;
-/// Largest reference accepted, in pixels (osc.md: images over 64 megapixels are refused).
+/// Largest reference accepted, in pixels (docs/osc.md: images over 64 megapixels are refused).
 pub const MAX_REFERENCE_PIXELS: u64 = 64_000_000;
 /// Fraction of the brightest pixels assumed lit by key lights (paper 4.2.1).
 pub const KEY_FRACTION: f64 = 0.15;

@@ -322,7 +322,7 @@ fn color_step(
 }
 
 /// A palette colour's hue and saturation at full value: the light's brightness comes from
-/// its intensity (algorithm.md). Black has no hue and becomes white.
+/// its intensity (docs/method.md). Black has no hue and becomes white.
 pub fn full_value(srgb: [f32; 3]) -> [f32; 3] {
     let lin = srgb.map(srgb_to_linear);
     let max = lin[0].max(lin[1]).max(lin[2]);

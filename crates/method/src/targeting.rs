@@ -8,7 +8,7 @@ use rayon::prelude::*;
 use visobjd_compositor::basis::BasisImages;
 use crate::objective::Region;
 
-/// Width the footprints are analysed at (algorithm.md: "such as 128 px wide").
+/// Width the footprints are analysed at (docs/method.md, "Region targeting").
 pub const WORKING_WIDTH: usize = 128;
 /// A light's bright pixels: its top 15% by luminance among the pixels it lights.
 const BRIGHT_FRACTION: f64 = 0.15;

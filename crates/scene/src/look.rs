@@ -67,7 +67,7 @@ pub struct LightEntry {
     pub color: Option<[f32; 3]>,
 }
 
-/// A look file (cli.md): what `render --look` reads and the daemon saves.
+/// A look file (docs/cli.md): what `render --look` reads and the daemon saves.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct LookFile {

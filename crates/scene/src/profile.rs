@@ -1,4 +1,4 @@
-//! Fixture profiles: which DMX slots a light has and what each one means (scene.md).
+//! Fixture profiles: which DMX slots a light has and what each one means (docs/scene.md).
 
 use std::fmt;
 
@@ -93,7 +93,7 @@ pub struct Profile {
     pub slots: Vec<Slot>,
 }
 
-/// The profiles every scene knows without defining them (scene.md).
+/// The profiles every scene knows without defining them (docs/scene.md).
 const BUILT_IN: &[(&str, &[Slot])] = &[
     ("dimmer", &[Slot::Intensity]),
     ("dimmer16", &[Slot::Intensity16]),
