@@ -18,9 +18,9 @@ use std::time::Duration;
 use rosc::{OscMessage, OscPacket, OscType};
 use serde::Deserialize;
 
-use visobjd_scene::look::Look;
 use crate::osc::framing::{self, Framing};
 use visobjd_scene::Scene;
+use visobjd_scene::look::Look;
 
 /// How long connecting to and writing to the console may take.
 const TIMEOUT: Duration = Duration::from_secs(3);

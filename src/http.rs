@@ -30,8 +30,8 @@ use tokio::sync::{Mutex, Semaphore};
 
 use crate::config::{Cidr, permits};
 use crate::engine::{Engine, EngineHandler, msg};
-use visobjd_scene::look::Look;
 use crate::osc::{Handler, Peer};
+use visobjd_scene::look::Look;
 
 /// Largest request head (request line and headers).
 const MAX_HEAD: usize = 8 * 1024;
@@ -53,6 +53,7 @@ const PAGE: &str = include_str!("http_page.html");
 /// The running listener; dropping the runtime stops it.
 pub struct Http {
     addr: SocketAddr,
+    accept: tokio::task::JoinHandle<()>,
 }
 
 impl Http {
@@ -76,8 +77,15 @@ impl Http {
             live: Mutex::new(None),
             refs: Mutex::new(Vec::new()),
         });
-        tokio::spawn(accept(listener, shared));
-        Ok(Http { addr })
+        let accept = tokio::spawn(accept(listener, shared));
+        Ok(Http { addr, accept })
+    }
+
+    /// Stops taking connections (those open end with the runtime).
+    pub async fn stop(self) {
+        self.accept.abort();
+        // A cancelled task's error is the expected outcome.
+        let _ = self.accept.await;
     }
 
     /// The address it listens on.
@@ -502,8 +510,11 @@ async fn reference(shared: &Shared, id: u32) -> Answer {
 async fn pick(shared: &Shared, from: SocketAddr, k: i32) -> Answer {
     let handler = EngineHandler(Arc::clone(&shared.engine));
     let (peer, _replies) = Peer::capture(from);
-    let Some(replies) =
-        blocking(move || handler.handle(msg("/vo/pick", vec![OscType::Int(k)]), &peer)).await
+    let Some(replies) = blocking(move || {
+        let pick = crate::osc::args::Request::new(msg("/vo/pick", vec![OscType::Int(k)]));
+        handler.handle(pick, &peer)
+    })
+    .await
     else {
         return Answer::text(500, "the pick failed");
     };

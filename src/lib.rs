@@ -12,4 +12,5 @@ pub mod engine;
 pub mod eos;
 pub mod http;
 pub mod osc;
+pub mod shutdown;
 pub mod touchosc;

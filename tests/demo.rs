@@ -7,10 +7,10 @@ use std::path::Path;
 
 use rand::SeedableRng;
 use visobjd_compositor::color::{lightness, luminance, srgb8_to_linear_table};
-use visobjd_scene::look::Look;
 use visobjd_method::objective::{Aspects, Objective, Region, analyze, decode_reference};
 use visobjd_method::sampler::{Constraints, Spread};
 use visobjd_method::stage::{GenerateRequest, Stage};
+use visobjd_scene::look::Look;
 
 const DEMO: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/demo");
 

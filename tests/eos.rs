@@ -7,8 +7,8 @@ use std::path::Path;
 
 use rosc::{OscPacket, OscType};
 use visobjd::eos::{EosConfig, Protocol, preset_commands, push};
-use visobjd_scene::look::{Level, Look};
 use visobjd_scene::Scene;
+use visobjd_scene::look::{Level, Look};
 
 #[test]
 fn a_44_light_look_arrives_as_exact_command_lines() {

@@ -5,12 +5,12 @@ mod common;
 use rand::SeedableRng;
 use rand::rngs::Xoshiro256PlusPlus as Rng;
 use visobjd_compositor::color::encode_srgb8;
-use visobjd_method::gallery::{lab_proxies, mean_delta_e};
-use visobjd_scene::look::{Level, Look};
-use visobjd_method::objective::{Aspects, Objective, Region, analyze};
 use visobjd_compositor::render::{composite, render_reference, weights};
+use visobjd_method::gallery::{lab_proxies, mean_delta_e};
+use visobjd_method::objective::{Aspects, Objective, Region, analyze};
 use visobjd_method::sampler::{Constraints, Spread};
 use visobjd_method::stage::{GenerateRequest, Stage};
+use visobjd_scene::look::{Level, Look};
 
 fn stage(name: &str, lights: usize) -> Stage {
     let dir = common::temp_dir(name);
@@ -73,7 +73,12 @@ fn batched_compositor_matches_the_scalar_reference() {
     }
 }
 
-fn generate(st: &Stage, seed: u64, count: usize, clusters: usize) -> visobjd_method::gallery::Generation {
+fn generate(
+    st: &Stage,
+    seed: u64,
+    count: usize,
+    clusters: usize,
+) -> visobjd_method::gallery::Generation {
     let base = Look::off(st.scene.lights.len());
     st.generate(
         &GenerateRequest {

@@ -13,6 +13,7 @@ use std::time::{Duration, Instant};
 use common::tools;
 use rosc::{OscBundle, OscMessage, OscPacket, OscTime, OscType};
 use visobjd::config::OscConfig;
+use visobjd::osc::args::Request;
 use visobjd::osc::framing::{self, Decoder, Frame, Framing};
 use visobjd::osc::{Handler, Limits, Peer, Server, Transport};
 
@@ -24,7 +25,7 @@ const QUIET: Duration = Duration::from_millis(150);
 /// `/panic`, answers `/vo/generate`; anything else is an unknown address.
 #[derive(Default)]
 struct TestHandler {
-    seen: Mutex<Vec<OscMessage>>,
+    seen: Mutex<Vec<Request>>,
 }
 
 impl TestHandler {
@@ -42,7 +43,7 @@ fn msg(addr: &str, args: Vec<OscType>) -> OscMessage {
 }
 
 impl Handler for TestHandler {
-    fn handle(&self, m: OscMessage, peer: &Peer) -> Vec<OscMessage> {
+    fn handle(&self, m: Request, peer: &Peer) -> Vec<OscMessage> {
         self.seen.lock().unwrap().push(m.clone());
         match m.addr.to_lowercase().as_str() {
             "/echo" => vec![msg("/echo", m.args)],

@@ -9,9 +9,9 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use visobjd_dmx::Patch;
-use visobjd_scene::look::{Level, Look};
 use visobjd_dmx::{ArtnetDest, Output, OutputConfig, SacnDest};
 use visobjd_scene::Scene;
+use visobjd_scene::look::{Level, Look};
 
 mod common;
 

@@ -6,9 +6,9 @@ mod common;
 use rand::SeedableRng;
 use rand::rngs::Xoshiro256PlusPlus as Rng;
 use rand_distr::{Distribution, Normal};
-use visobjd_scene::look::{Level, Look};
 use visobjd_method::objective::{Aspects, PaletteColor, Region};
 use visobjd_method::sampler::{Constraints, Keys, Plan, Rig, Spread, Target, gibbs, key_count};
+use visobjd_scene::look::{Level, Look};
 
 fn mean(v: &[f32]) -> f32 {
     v.iter().sum::<f32>() / v.len() as f32

@@ -2,8 +2,8 @@
 //! `tests/fuzz_corpus.rs`, which replays the committed corpus and every crash found so far
 //! under `cargo test`.
 
-use visobjd_method::objective::{Region, analyze, decode_reference_bytes};
 use visobjd::osc::framing::{Decoder, Frame, HEAD, encode};
+use visobjd_method::objective::{Region, analyze, decode_reference_bytes};
 
 /// One UDP datagram (or stream frame) through the daemon's parsing: packet decoding with
 /// its nesting limit, bundles, malformed messages, the argument rules and every command's

@@ -8,12 +8,12 @@ use std::time::{Duration, Instant};
 use anyhow::Context;
 use rand::{RngExt, SeedableRng};
 
-use visobjd_scene::look::{Level, Look};
-use visobjd_method::objective::{Aspects, Objective, Region, analyze, decode_reference};
-use visobjd_dmx::{Output, OutputConfig, SacnDest};
 use visobjd_compositor::render::{Kernel, composite_clamped, composite_srgb8, weights};
+use visobjd_dmx::{Output, OutputConfig, SacnDest};
+use visobjd_method::objective::{Aspects, Objective, Region, analyze, decode_reference};
 use visobjd_method::sampler::{Constraints, Spread};
 use visobjd_method::stage::{GenerateRequest, Stage, THUMB_WIDTH};
+use visobjd_scene::look::{Level, Look};
 
 /// Arguments of `bench`.
 #[derive(clap::Args)]

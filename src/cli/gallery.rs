@@ -8,11 +8,13 @@ use rand::SeedableRng;
 use serde::Serialize;
 
 use visobjd_method::gallery::Generation;
-use visobjd_scene::look::{LightEntry, LookFile, entries};
-use visobjd_method::objective::{Aspects, Objective, ObjectiveRecord, Region, analyze, decode_reference};
+use visobjd_method::objective::{
+    Aspects, Objective, ObjectiveRecord, Region, analyze, decode_reference,
+};
 use visobjd_method::sampler::{Constraints, Spread};
 use visobjd_method::sheet::contact_sheet;
 use visobjd_method::stage::{GenerateRequest, Stage, THUMB_WIDTH};
+use visobjd_scene::look::{LightEntry, LookFile, entries};
 
 /// Arguments of `gallery`. `--aspects`, `--region` and `--crop` apply to the `--ref`
 /// before them (or, given before any `--ref`, to the first).

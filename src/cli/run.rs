@@ -11,15 +11,15 @@ use std::sync::Arc;
 use anyhow::Context;
 
 use crate::config::Config;
-use visobjd_dmx::Patch;
 use crate::engine::persist::{Files, restore_live};
 use crate::engine::session::Session;
 use crate::engine::{Engine, EngineHandler};
-use visobjd_scene::look::Look;
 use crate::osc::Server;
 use visobjd_dmx::Output;
-use visobjd_scene::Scene;
+use visobjd_dmx::Patch;
 use visobjd_method::stage::{Stage, THUMB_WIDTH};
+use visobjd_scene::Scene;
+use visobjd_scene::look::Look;
 
 /// Arguments of `run`.
 #[derive(clap::Args)]
@@ -89,8 +89,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .build()
         .context("cannot start the async runtime")?;
     let result = runtime.block_on(serve(&config, &engine));
-    engine.shutdown();
-    tracing::info!("stopped");
+    crate::shutdown::finish(&engine);
     result
 }
 
@@ -116,31 +115,27 @@ async fn watchdog(engine: Arc<crate::engine::Engine>, period: std::time::Duratio
 }
 
 async fn serve(config: &Config, engine: &Arc<Engine>) -> anyhow::Result<()> {
-    use tokio::signal::unix::{SignalKind, signal};
     let server = Server::start(&config.osc, Arc::new(EngineHandler(Arc::clone(engine))))
         .map_err(anyhow::Error::msg)?;
     if let Some(sender) = server.sender() {
         engine.set_push(sender);
     }
-    // The web gallery lives as long as the runtime.
-    if !config.http.listen.is_empty() {
+    let http = if config.http.listen.is_empty() {
+        None
+    } else {
         let http =
             crate::http::Http::start(&config.http.listen, config.allow_list(), Arc::clone(engine))
                 .await
                 .map_err(anyhow::Error::msg)?;
         tracing::info!("web gallery on http://{}/", http.addr());
-    }
+        Some(http)
+    };
     let _ = sd_notify::notify(&[sd_notify::NotifyState::Ready]);
+    let mut tasks = Vec::new();
     if let Some(period) = sd_notify::watchdog_enabled() {
-        tokio::spawn(watchdog(Arc::clone(engine), period));
+        tasks.push(tokio::spawn(watchdog(Arc::clone(engine), period)));
     }
-    let mut term = signal(SignalKind::terminate()).context("cannot watch SIGTERM")?;
-    let mut int = signal(SignalKind::interrupt()).context("cannot watch SIGINT")?;
-    tokio::select! {
-        _ = term.recv() => tracing::info!("SIGTERM: stopping"),
-        _ = int.recv() => tracing::info!("SIGINT: stopping"),
-    }
-    let _ = sd_notify::notify(&[sd_notify::NotifyState::Stopping]);
-    server.stop().await;
-    Ok(())
+    let signalled = crate::shutdown::signalled().await;
+    crate::shutdown::stop_intake(server, http, tasks).await;
+    signalled
 }

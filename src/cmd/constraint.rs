@@ -6,7 +6,7 @@ use std::sync::Arc;
 use rosc::OscMessage;
 
 use super::{group, int, light, switch_arg, text};
-use crate::engine::{Engine, msg};
+use crate::engine::{Engine, Outcome, msg};
 use crate::osc::args::Request;
 
 pub enum Cmd {
@@ -40,34 +40,34 @@ impl Cmd {
 
     pub fn apply(self, e: &Arc<Engine>) -> Result<Vec<OscMessage>, String> {
         let scene = &e.stage.scene;
-        let mut s = e.session();
-        let reply = match self {
-            Cmd::GroupKey { name, on } => {
-                let g = group(scene, &name)?;
-                s.key_groups[g] = on;
-                msg(
-                    "/vo/group/key",
-                    vec![text(&scene.groups[g].name), int(on.into())],
-                )
-            }
-            Cmd::GroupLock { name, on } => {
-                let g = group(scene, &name)?;
-                s.locked_groups[g] = on;
-                msg(
-                    "/vo/group/lock",
-                    vec![text(&scene.groups[g].name), int(on.into())],
-                )
-            }
-            Cmd::LightLock { channel, on } => {
-                let l = light(scene, &channel)?;
-                s.locked_lights[l] = on;
-                msg(
-                    "/vo/light/lock",
-                    vec![int(scene.lights[l].channel as usize), int(on.into())],
-                )
-            }
-        };
-        e.persist(s, true)?;
-        Ok(vec![reply])
+        e.commit(|s| {
+            let reply = match self {
+                Cmd::GroupKey { name, on } => {
+                    let g = group(scene, &name)?;
+                    s.key_groups[g] = on;
+                    msg(
+                        "/vo/group/key",
+                        vec![text(&scene.groups[g].name), int(on.into())],
+                    )
+                }
+                Cmd::GroupLock { name, on } => {
+                    let g = group(scene, &name)?;
+                    s.locked_groups[g] = on;
+                    msg(
+                        "/vo/group/lock",
+                        vec![text(&scene.groups[g].name), int(on.into())],
+                    )
+                }
+                Cmd::LightLock { channel, on } => {
+                    let l = light(scene, &channel)?;
+                    s.locked_lights[l] = on;
+                    msg(
+                        "/vo/light/lock",
+                        vec![int(scene.lights[l].channel as usize), int(on.into())],
+                    )
+                }
+            };
+            Ok(Outcome::reply(reply).saved())
+        })
     }
 }

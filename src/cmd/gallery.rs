@@ -6,8 +6,8 @@ use std::sync::Arc;
 use rosc::OscMessage;
 
 use super::{int, int_arg, light_args, opt_int_arg};
-use crate::engine::session::Change;
-use crate::engine::{Engine, gallery_look, msg};
+use crate::engine::session::{Change, Session};
+use crate::engine::{Engine, Outcome, gallery_look, msg};
 use crate::osc::args::Request;
 
 pub enum Cmd {
@@ -49,9 +49,9 @@ impl Cmd {
     }
 
     pub fn apply(self, e: &Arc<Engine>) -> Result<Vec<OscMessage>, String> {
-        let mut s = e.session();
-        match self {
-            Cmd::Pick { k, m } => pick(e, s, k, m),
+        let scene = &e.stage.scene;
+        e.commit(|s| match self {
+            Cmd::Pick { k, m } => pick(s, k, m),
             Cmd::Step { forward } => {
                 let n = s.gallery.as_ref().map_or(0, |g| g.len());
                 if n == 0 {
@@ -63,7 +63,7 @@ impl Cmd {
                     (None, true) => 1,
                     (None, false) => n,
                 };
-                pick(e, s, k, 1)
+                pick(s, k, 1)
             }
             Cmd::Undo | Cmd::Redo => {
                 let undo = matches!(self, Cmd::Undo);
@@ -73,46 +73,36 @@ impl Cmd {
                 } else {
                     "nothing to redo"
                 })?;
-                e.show(&s, s.fade_s);
-                let feedback = e.feedback(&s);
-                let saved = e.persist(s, true);
-                e.notify(&feedback);
-                saved?;
                 let addr = if undo { "/vo/undone" } else { "/vo/redone" };
-                Ok(vec![msg(addr, vec![int(depth)])])
+                Ok(Outcome::reply(msg(addr, vec![int(depth)]))
+                    .show_look(s.fade_s)
+                    .saved()
+                    .pushed())
             }
             Cmd::Candidate { k, m } => {
-                let look = gallery_look(&s, k, m)?;
+                let look = gallery_look(s, k, m)?;
                 let mut a = vec![int(k), int(m)];
-                a.extend(light_args(&e.stage.scene, &look));
-                Ok(vec![msg("/vo/candidate", a)])
+                a.extend(light_args(scene, &look));
+                Ok(Outcome::reply(msg("/vo/candidate", a)))
             }
-            Cmd::Gallery => Ok(vec![sizes(&s)]),
-        }
+            Cmd::Gallery => Ok(Outcome::reply(sizes(s))),
+        })
     }
 }
 
 /// Puts entry `k`, member `m` live with the fade and makes it the base.
-fn pick(
-    e: &Arc<Engine>,
-    mut s: std::sync::MutexGuard<'_, crate::engine::session::Session>,
-    k: usize,
-    m: usize,
-) -> Result<Vec<OscMessage>, String> {
-    let look = gallery_look(&s, k, m)?;
+fn pick(s: &mut Session, k: usize, m: usize) -> Result<Outcome, String> {
+    let look = gallery_look(s, k, m)?;
     s.set_base(look, Change::Step);
     s.entry = Some((k, m));
-    e.show(&s, s.fade_s);
-    let picked = msg("/vo/picked", vec![int(k), int(m)]);
-    let feedback = e.feedback(&s);
-    let saved = e.persist(s, true);
-    e.notify(&[std::slice::from_ref(&picked), feedback.as_slice()].concat());
-    saved?;
-    Ok(vec![picked])
+    Ok(Outcome::reply(msg("/vo/picked", vec![int(k), int(m)]))
+        .show_look(s.fade_s)
+        .saved()
+        .echoed())
 }
 
 /// `/vo/gallery clusters size_1 ... size_c` (just `0` before the first generate).
-pub fn sizes(s: &crate::engine::session::Session) -> OscMessage {
+pub fn sizes(s: &Session) -> OscMessage {
     let sizes: Vec<usize> = s
         .gallery
         .as_ref()

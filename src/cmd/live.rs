@@ -7,7 +7,7 @@ use rosc::{OscMessage, OscType};
 
 use super::{group, int, light, light_args, num_arg, one_light, rgb_args, switch_arg, text};
 use crate::engine::session::Change;
-use crate::engine::{Engine, msg};
+use crate::engine::{Engine, Outcome, msg};
 use crate::osc::args::Request;
 
 /// What a fader sets.
@@ -63,87 +63,83 @@ impl Cmd {
 
     pub fn apply(self, e: &Arc<Engine>) -> Result<Vec<OscMessage>, String> {
         let scene = &e.stage.scene;
-        let mut s = e.session();
-        // (reply, wait for the disk, push the reply too: another tablet's fader follows)
-        let (reply, wait, push) = match self {
-            Cmd::Fader(target, value) => {
-                let lights = match &target {
-                    Target::Light(ch) => vec![light(scene, ch)?],
-                    Target::Group(name) => scene.groups[group(scene, name)?].lights.clone(),
-                };
-                let coloured: Vec<usize> = match value {
-                    Set::Color(_) => lights
-                        .iter()
-                        .copied()
-                        .filter(|&l| scene.profile(l).has_colour())
-                        .collect(),
-                    Set::Intensity(_) => lights.clone(),
-                };
-                if coloured.is_empty() {
-                    return Err(match &target {
-                        Target::Light(_) => format!(
-                            "light {} is a `{}` and has no colour",
-                            scene.lights[lights[0]].channel,
-                            scene.profile(lights[0]).name
-                        ),
-                        Target::Group(name) => format!("group `{name}` has no light with colour"),
-                    });
+        e.commit(|s| {
+            Ok(match self {
+                Cmd::Fader(target, value) => {
+                    let lights = match &target {
+                        Target::Light(ch) => vec![light(scene, ch)?],
+                        Target::Group(name) => scene.groups[group(scene, name)?].lights.clone(),
+                    };
+                    let coloured: Vec<usize> = match value {
+                        Set::Color(_) => lights
+                            .iter()
+                            .copied()
+                            .filter(|&l| scene.profile(l).has_colour())
+                            .collect(),
+                        Set::Intensity(_) => lights.clone(),
+                    };
+                    if coloured.is_empty() {
+                        return Err(match &target {
+                            Target::Light(_) => format!(
+                                "light {} is a `{}` and has no colour",
+                                scene.lights[lights[0]].channel,
+                                scene.profile(lights[0]).name
+                            ),
+                            Target::Group(name) => {
+                                format!("group `{name}` has no light with colour")
+                            }
+                        });
+                    }
+                    let mut look = s.live.clone();
+                    for &l in &coloured {
+                        match value {
+                            Set::Intensity(v) => look.levels[l].intensity = v,
+                            Set::Color(c) => look.levels[l].color = c,
+                        }
+                    }
+                    s.set_base(look, Change::Fader);
+                    s.entry = None;
+                    let reply = match target {
+                        Target::Light(_) => {
+                            let l = coloured[0];
+                            msg(
+                                "/vo/light",
+                                one_light(scene.lights[l].channel, &s.live.levels[l]).to_vec(),
+                            )
+                        }
+                        Target::Group(name) => {
+                            let g = group(scene, &name)?;
+                            msg(
+                                "/vo/group",
+                                vec![text(&scene.groups[g].name), int(coloured.len())],
+                            )
+                        }
+                    };
+                    // A flood of fader moves costs one write per moment, not one per move.
+                    Outcome::reply(reply).show_look(0.0).saved_later().pushed()
                 }
-                let mut look = s.live.clone();
-                for &l in &coloured {
-                    match value {
-                        Set::Intensity(v) => look.levels[l].intensity = v,
-                        Set::Color(c) => look.levels[l].color = c,
-                    }
+                Cmd::Live => Outcome::reply(msg("/vo/live", light_args(scene, &s.live))),
+                Cmd::Fade(v) => {
+                    s.fade_s = v;
+                    Outcome::reply(msg("/vo/fade", vec![OscType::Float(v)]))
+                        .saved()
+                        .echoed()
                 }
-                s.set_base(look, Change::Fader);
-                s.entry = None;
-                e.show(&s, 0.0);
-                let reply = match target {
-                    Target::Light(_) => {
-                        let l = coloured[0];
-                        msg(
-                            "/vo/light",
-                            one_light(scene.lights[l].channel, &s.live.levels[l]).to_vec(),
-                        )
-                    }
-                    Target::Group(name) => {
-                        let g = group(scene, &name)?;
-                        msg(
-                            "/vo/group",
-                            vec![text(&scene.groups[g].name), int(coloured.len())],
-                        )
-                    }
-                };
-                (reply, false, false)
-            }
-            Cmd::Live => {
-                let mut a = Vec::with_capacity(scene.lights.len() * 5);
-                a.extend(light_args(scene, &s.live));
-                return Ok(vec![msg("/vo/live", a)]);
-            }
-            Cmd::Fade(v) => {
-                s.fade_s = v;
-                (msg("/vo/fade", vec![OscType::Float(v)]), true, true)
-            }
-            Cmd::Master(v) => {
-                s.master = v;
-                e.show_master(&s);
-                (msg("/vo/master", vec![OscType::Float(v)]), false, true)
-            }
-            Cmd::Blackout(on) => {
-                s.blackout = on;
-                e.show_master(&s);
-                (msg("/vo/blackout", vec![int(on.into())]), true, true)
-            }
-        };
-        let mut feedback = e.feedback(&s);
-        if push {
-            feedback.insert(0, reply.clone());
-        }
-        let saved = e.persist(s, wait);
-        e.notify(&feedback);
-        saved?;
-        Ok(vec![reply])
+                Cmd::Master(v) => {
+                    s.master = v;
+                    Outcome::reply(msg("/vo/master", vec![OscType::Float(v)]))
+                        .show_master()
+                        .saved_later()
+                        .echoed()
+                }
+                Cmd::Blackout(on) => {
+                    s.blackout = on;
+                    Outcome::reply(msg("/vo/blackout", vec![int(on.into())]))
+                        .show_master()
+                        .saved()
+                        .echoed()
+                }
+            })
+        })
     }
 }

@@ -6,10 +6,10 @@ use std::sync::Arc;
 use rosc::OscMessage;
 
 use super::{int, int_arg, text};
-use crate::engine::session::Change;
-use crate::engine::{Engine, msg};
-use visobjd_scene::look::LookFile;
+use crate::engine::session::{Change, Session};
+use crate::engine::{Engine, Outcome, msg};
 use crate::osc::args::{self, Request};
+use visobjd_scene::look::LookFile;
 
 /// Largest look number (docs/osc.md).
 const MAX_LOOK: i64 = 9999;
@@ -53,31 +53,30 @@ impl Cmd {
                 .map_err(|err| format!("look {n} was not saved: {err}"))?;
                 Ok(vec![msg("/vo/look/saved", vec![int(n as usize)])])
             }
-            Cmd::Recall(n) => {
-                let mut s = e.session();
+            Cmd::Recall(n) => e.commit(|s| {
                 let file = s.looks.get(&n).ok_or_else(|| missing(n))?;
                 let look = file.to_look(scene)?;
                 s.set_base(look, Change::Step);
                 s.entry = None;
-                e.show(&s, s.fade_s);
-                let feedback = e.feedback(&s);
-                let saved = e.persist(s, true);
-                e.notify(&feedback);
-                saved?;
-                Ok(vec![msg("/vo/look/recalled", vec![int(n as usize)])])
-            }
+                Ok(
+                    Outcome::reply(msg("/vo/look/recalled", vec![int(n as usize)]))
+                        .show_look(s.fade_s)
+                        .saved()
+                        .pushed(),
+                )
+            }),
             Cmd::Delete(n) => {
                 e.change_looks(|_, looks| looks.remove(&n).map(drop).ok_or_else(|| missing(n)))
                     .map_err(|err| format!("look {n} was not deleted: {err}"))?;
                 Ok(vec![msg("/vo/look/deleted", vec![int(n as usize)])])
             }
-            Cmd::List => Ok(list(&e.session())),
+            Cmd::List => e.commit(|s| Ok(Outcome::replies(list(s)))),
         }
     }
 }
 
 /// One `/vo/look n label` per saved look, then `/vo/looks/end count`.
-pub fn list(s: &crate::engine::session::Session) -> Vec<OscMessage> {
+pub fn list(s: &Session) -> Vec<OscMessage> {
     let mut out: Vec<OscMessage> = s
         .looks
         .iter()

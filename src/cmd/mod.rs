@@ -19,11 +19,11 @@ use std::sync::Arc;
 use rosc::{OscMessage, OscType};
 
 use crate::engine::Engine;
-use visobjd_scene::look::Look;
 use crate::osc::Peer;
 use crate::osc::args::{self, Request};
 use crate::osc::packet::{self, Item, PacketError};
 use visobjd_scene::Scene;
+use visobjd_scene::look::Look;
 
 /// Every command the daemon understands.
 enum Command {
@@ -100,9 +100,8 @@ impl Command {
 pub use gallery::sizes as gallery_sizes;
 
 /// Parses and applies one message: its replies, or the sentence for `/vo/error`.
-pub fn run(e: &Arc<Engine>, m: &OscMessage, peer: &Peer) -> Result<Vec<OscMessage>, String> {
-    let req = Request::new(m);
-    Command::parse(&req)?.apply(e, peer)
+pub fn run(e: &Arc<Engine>, req: &Request, peer: &Peer) -> Result<Vec<OscMessage>, String> {
+    Command::parse(req)?.apply(e, peer)
 }
 
 /// Reads one received packet (a datagram or a stream frame) the way the daemon does, up to
@@ -114,9 +113,8 @@ pub fn parse(bytes: &[u8]) -> Result<Vec<Result<&'static str, String>>, PacketEr
         .into_iter()
         .filter_map(|item| match item {
             Item::Message(m) => {
-                let req = Request::new(&m);
-                (!(m.args.len() <= 1 && req.is_button_release()))
-                    .then(|| Command::parse(&req).map(|c| c.family()))
+                let req = Request::new(m);
+                (!req.is_button_release()).then(|| Command::parse(&req).map(|c| c.family()))
             }
             Item::Malformed { why, .. } => Some(Err(why)),
         })

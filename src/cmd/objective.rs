@@ -5,12 +5,22 @@ use std::sync::Arc;
 use rosc::{OscMessage, OscType};
 
 use super::{int, int_arg, num_arg, rgb_args, text};
-use crate::engine::{Engine, msg};
-use visobjd_method::objective::{Aspects, Objective, Region};
+use crate::engine::session::{Entry, Session};
+use crate::engine::{Engine, Outcome, msg};
 use crate::osc::args::{self, Request};
+use visobjd_method::objective::{Aspects, Objective, Region};
 
 pub enum Cmd {
-    Add { image: String, aspects: Aspects },
+    /// Reads the image first (slow, outside the session), then adds the objective.
+    Add {
+        image: String,
+        aspects: Aspects,
+    },
+    Edit(Edit),
+}
+
+/// The objective commands that only change (or read) the session.
+pub enum Edit {
     Aspects { id: Which, aspects: Aspects },
     Region { id: Which, region: Region },
     Palette { id: Which },
@@ -55,24 +65,24 @@ impl Cmd {
             }));
         }
         if req.matches("/vo/objective/clear").is_some() {
-            return Ok(Some(Cmd::Clear));
+            return Ok(Some(Cmd::Edit(Edit::Clear)));
         }
         if req.matches("/vo/objectives").is_some() {
-            return Ok(Some(Cmd::List));
+            return Ok(Some(Cmd::Edit(Edit::List)));
         }
         let Some(captures) = req.matches("/vo/objective/*/*") else {
             return Ok(None);
         };
         let (seg, what) = (captures[0], captures[1]);
-        Ok(Some(match what {
-            "aspects" => Cmd::Aspects {
+        Ok(Some(Cmd::Edit(match what {
+            "aspects" => Edit::Aspects {
                 id: id(seg)?,
                 aspects: Aspects::parse(args::string(
                     args::required(&req.args, 0, "aspects")?,
                     "aspects",
                 )?)?,
             },
-            "region" => Cmd::Region {
+            "region" => Edit::Region {
                 id: id(seg)?,
                 region: if req.args.is_empty() {
                     Region::FULL
@@ -85,99 +95,108 @@ impl Cmd {
                     )?
                 },
             },
-            "palette" => Cmd::Palette { id: id(seg)? },
-            "color" | "colour" => Cmd::Color {
+            "palette" => Edit::Palette { id: id(seg)? },
+            "color" | "colour" => Edit::Color {
                 id: id(seg)?,
                 k: int_arg(req, 0, "palette colour number", 1, 64)? as usize,
                 rgb: rgb_args(req, 1)?,
             },
-            "remove" => Cmd::Remove { id: id(seg)? },
+            "remove" => Edit::Remove { id: id(seg)? },
             _ => return Ok(None),
-        }))
+        })))
     }
 
     pub fn apply(self, e: &Arc<Engine>) -> Result<Vec<OscMessage>, String> {
-        match self {
-            Cmd::Add { image, aspects } => Ok(vec![e.add_objective(&image, aspects)?]),
-            Cmd::Aspects { id, aspects } => {
-                let mut s = e.session();
-                let (i, id) = find(&s, id)?;
-                s.objectives[i].objective.aspects = aspects;
-                e.persist(s, true)?;
-                Ok(vec![msg(
-                    "/vo/objective/aspects",
-                    vec![int(id as usize), text(aspects.name())],
-                )])
-            }
-            Cmd::Region { id, region } => {
-                let lights = e
-                    .stage
-                    .footprints
-                    .select(region)
-                    .iter()
-                    .filter(|&&on| on)
-                    .count();
-                let mut s = e.session();
-                let (i, id) = find(&s, id)?;
-                s.objectives[i].objective.region = region;
-                e.persist(s, true)?;
-                Ok(vec![msg(
-                    "/vo/objective/region",
-                    vec![
-                        int(id as usize),
-                        OscType::Float(region.x0),
-                        OscType::Float(region.y0),
-                        OscType::Float(region.x1),
-                        OscType::Float(region.y1),
-                        int(lights),
-                    ],
-                )])
-            }
-            Cmd::Palette { id } => {
-                let s = e.session();
-                let (i, id) = find(&s, id)?;
-                Ok(vec![palette(id, &s.objectives[i].objective)])
-            }
-            Cmd::Color { id, k, rgb } => {
-                let mut s = e.session();
-                let (i, id) = find(&s, id)?;
-                let colors = &mut s.objectives[i].objective.analysis.palette;
-                let n = colors.len();
-                let c = colors.get_mut(k - 1).ok_or_else(|| {
-                    format!("objective {id} has no palette colour {k} (colours 1-{n})")
-                })?;
-                c.color = rgb;
-                let reply = palette(id, &s.objectives[i].objective);
-                e.persist(s, true)?;
-                Ok(vec![reply])
-            }
-            Cmd::Remove { id } => {
-                let mut s = e.session();
-                let (i, id) = find(&s, id)?;
-                s.objectives.remove(i);
-                let feedback = e.feedback(&s);
-                let saved = e.persist(s, true);
-                e.notify(&feedback);
-                saved?;
-                Ok(vec![msg("/vo/objective/removed", vec![int(id as usize)])])
-            }
-            Cmd::Clear => {
-                let mut s = e.session();
-                let n = s.objectives.len();
-                s.objectives.clear();
-                let feedback = e.feedback(&s);
-                let saved = e.persist(s, true);
-                e.notify(&feedback);
-                saved?;
-                Ok(vec![msg("/vo/objective/cleared", vec![int(n)])])
-            }
-            Cmd::List => Ok(list(&e.session())),
-        }
+        let edit = match self {
+            Cmd::Add { image, aspects } => return add(e, &image, aspects),
+            Cmd::Edit(edit) => edit,
+        };
+        let footprints = &e.stage.footprints;
+        e.commit(|s| {
+            Ok(match edit {
+                Edit::Aspects { id, aspects } => {
+                    let (i, id) = find(s, id)?;
+                    s.objectives[i].objective.aspects = aspects;
+                    Outcome::reply(msg(
+                        "/vo/objective/aspects",
+                        vec![int(id as usize), text(aspects.name())],
+                    ))
+                    .saved()
+                }
+                Edit::Region { id, region } => {
+                    let (i, id) = find(s, id)?;
+                    let lights = footprints.select(region).iter().filter(|&&on| on).count();
+                    s.objectives[i].objective.region = region;
+                    Outcome::reply(msg(
+                        "/vo/objective/region",
+                        vec![
+                            int(id as usize),
+                            OscType::Float(region.x0),
+                            OscType::Float(region.y0),
+                            OscType::Float(region.x1),
+                            OscType::Float(region.y1),
+                            int(lights),
+                        ],
+                    ))
+                    .saved()
+                }
+                Edit::Palette { id } => {
+                    let (i, id) = find(s, id)?;
+                    Outcome::reply(palette(id, &s.objectives[i].objective))
+                }
+                Edit::Color { id, k, rgb } => {
+                    let (i, id) = find(s, id)?;
+                    let colors = &mut s.objectives[i].objective.analysis.palette;
+                    let n = colors.len();
+                    let c = colors.get_mut(k - 1).ok_or_else(|| {
+                        format!("objective {id} has no palette colour {k} (colours 1-{n})")
+                    })?;
+                    c.color = rgb;
+                    Outcome::reply(palette(id, &s.objectives[i].objective)).saved()
+                }
+                Edit::Remove { id } => {
+                    let (i, id) = find(s, id)?;
+                    s.objectives.remove(i);
+                    Outcome::reply(msg("/vo/objective/removed", vec![int(id as usize)]))
+                        .saved()
+                        .pushed()
+                }
+                Edit::Clear => {
+                    let n = s.objectives.len();
+                    s.objectives.clear();
+                    Outcome::reply(msg("/vo/objective/cleared", vec![int(n)]))
+                        .saved()
+                        .pushed()
+                }
+                Edit::List => Outcome::replies(list(s)),
+            })
+        })
     }
 }
 
-/// One `/vo/objective` per objective, then `/vo/objectives/end count`.
-pub fn list(s: &crate::engine::session::Session) -> Vec<OscMessage> {
+/// `/vo/objective/add`: the reference is read with the session unlocked, then added.
+fn add(e: &Engine, image: &str, aspects: Aspects) -> Result<Vec<OscMessage>, String> {
+    let objective = e.read_objective(image, aspects)?;
+    e.commit(|s| {
+        let id = s.next_id;
+        s.next_id += 1;
+        let st = objective.analysis.stats;
+        s.objectives.push(Entry { id, objective });
+        let added = msg(
+            "/vo/objective/added",
+            vec![
+                int(id as usize),
+                text(aspects.name()),
+                OscType::Float(st.mean_l),
+                OscType::Float(st.key_l),
+                OscType::Float(st.bright),
+            ],
+        );
+        Ok(Outcome::reply(added).saved().pushed())
+    })
+}
+
+pub fn list(s: &Session) -> Vec<OscMessage> {
     let mut out: Vec<OscMessage> = s
         .objectives
         .iter()
@@ -202,7 +221,7 @@ pub fn list(s: &crate::engine::session::Session) -> Vec<OscMessage> {
 }
 
 /// The index and number of the objective `which` names.
-fn find(s: &crate::engine::session::Session, which: Which) -> Result<(usize, u32), String> {
+fn find(s: &Session, which: Which) -> Result<(usize, u32), String> {
     let id =
         match which {
             Which::Id(id) => id,

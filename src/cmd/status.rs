@@ -6,7 +6,7 @@ use std::sync::Arc;
 use rosc::OscMessage;
 
 use super::{int, int_arg, opt_int_arg};
-use crate::engine::{Engine, msg};
+use crate::engine::{Engine, Outcome, msg};
 use crate::osc::Peer;
 use crate::osc::args::Request;
 
@@ -39,20 +39,21 @@ impl Cmd {
     pub fn apply(self, e: &Arc<Engine>, peer: &Peer) -> Result<Vec<OscMessage>, String> {
         match self {
             Cmd::Ping(args) => Ok(vec![msg("/vo/pong", args)]),
-            Cmd::Status => Ok(vec![e.status(&e.session())]),
+            Cmd::Status => e.commit(|s| Ok(Outcome::reply(e.status(s)))),
             Cmd::Subscribe(port) => {
                 let to = e.subscribe(peer, port);
                 // The whole state goes where the pushes will go, so a tablet that
                 // listens on another port than it sends from is complete at once.
-                let s = e.session();
-                let mut state = Vec::new();
-                if let Some((k, m)) = s.entry {
-                    state.push(msg("/vo/picked", vec![int(k), int(m)]));
-                }
-                state.extend(e.feedback(&s));
-                state.extend(super::objective::list(&s));
-                state.extend(super::looks::list(&s));
-                drop(s);
+                let state = e.commit(|s| {
+                    let mut state = Vec::new();
+                    if let Some((k, m)) = s.entry {
+                        state.push(msg("/vo/picked", vec![int(k), int(m)]));
+                    }
+                    state.extend(e.feedback(s));
+                    state.extend(super::objective::list(s));
+                    state.extend(super::looks::list(s));
+                    Ok(Outcome::replies(state))
+                })?;
                 let subscribed = msg("/vo/subscribed", vec![int(to.port().into())]);
                 if let Err(err) = e.push_to(to, &state) {
                     e.unsubscribe(peer);

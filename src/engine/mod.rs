@@ -6,8 +6,12 @@
 //! its gallery when done. The DMX clock never waits on any of it: it is handed the latest
 //! look through the output's watch channel.
 
+mod outcome;
 pub mod persist;
 pub mod session;
+
+pub use outcome::Outcome;
+use outcome::{Persist, Push, Show};
 
 use std::collections::BTreeMap;
 use std::net::SocketAddr;
@@ -21,15 +25,17 @@ use rosc::{OscMessage, OscType};
 
 use crate::cmd;
 use crate::config::Config;
-use visobjd_scene::look::Look;
-use visobjd_scene::look::LookFile;
-use visobjd_method::objective::{Objective, decode_reference};
+use crate::osc::args::Request;
 use crate::osc::{Handler, Peer, Sender};
-use visobjd_dmx::{Output, OutputStats};
-use visobjd_method::sampler::Spread;
-use visobjd_method::stage::{GenerateRequest, Stage};
+use crate::shutdown::Threads;
 use persist::{Files, Snapshot, Writer};
 use session::{Gallery, Session};
+use visobjd_dmx::{Output, OutputStats};
+use visobjd_method::objective::{Objective, decode_reference};
+use visobjd_method::sampler::Spread;
+use visobjd_method::stage::{GenerateRequest, Stage};
+use visobjd_scene::look::Look;
+use visobjd_scene::look::LookFile;
 
 /// How long a subscription lasts without a message from its subscriber (docs/osc.md).
 const SUBSCRIPTION: Duration = Duration::from_secs(600);
@@ -67,6 +73,8 @@ pub struct Engine {
     /// Held across a write of `looks.json`, so saves and deletes reach the disk in the
     /// order they change the looks, without holding the session during the fsync.
     looks_io: Mutex<()>,
+    /// Threads started for commands, joined at shutdown.
+    threads: Threads,
     subscribers: Mutex<Vec<Subscriber>>,
     push: OnceLock<Sender>,
     eos: crate::eos::EosConfig,
@@ -108,6 +116,7 @@ impl Engine {
             writer: Writer::start(files.clone())?,
             files,
             looks_io: Mutex::new(()),
+            threads: Threads::default(),
             subscribers: Mutex::new(Vec::new()),
             push: OnceLock::new(),
             eos: config.eos.clone(),
@@ -135,34 +144,45 @@ impl Engine {
         }
     }
 
-    /// Sends the live look of `s` to the output, fading over `fade_s`.
-    pub fn show(&self, s: &Session, fade_s: f32) {
-        self.with_output(|o| o.set_look(s.live.clone(), fade_s));
-    }
-
-    /// Sends master and blackout of `s` to the output (at once; a running fade goes on).
-    pub fn show_master(&self, s: &Session) {
-        self.with_output(|o| {
-            o.set_master(s.master);
-            o.set_blackout(s.blackout);
-        });
-    }
-
-    /// Persists the session, releasing its lock. With `wait`, returns only once it is on
-    /// disk (bounded), for discrete changes a restart must not lose, and an `Err` with the
-    /// sentence for `/vo/error` when the write failed: the change stays live (the stage is
-    /// never taken back for a full disk), but it would not survive a restart.
-    pub fn persist(&self, s: MutexGuard<'_, Session>, wait: bool) -> Result<(), String> {
-        let ticket = self.writer.save(Snapshot::of(&self.stage.scene, &s));
-        drop(s);
-        if !wait {
-            return Ok(());
+    /// The one path of every change to the session: locks it, lets `change` mutate it
+    /// (an `Err` must leave it as it was, and is answered as one `/vo/error`), then does
+    /// what the [`Outcome`] asks in this order: the output shows it, the state is queued
+    /// for the disk, the lock is released, subscribers are told, the write is waited for.
+    /// A failed write is an `Err` too, but the change stays live (the stage is never taken
+    /// back for a full disk): it would only not survive a restart.
+    pub fn commit(
+        &self,
+        change: impl FnOnce(&mut Session) -> Result<Outcome, String>,
+    ) -> Result<Vec<OscMessage>, String> {
+        let mut s = self.session();
+        let outcome = change(&mut s)?;
+        match outcome.show {
+            Show::Nothing => {}
+            Show::Look(fade_s) => self.with_output(|o| o.set_look(s.live.clone(), fade_s)),
+            Show::Master => self.with_output(|o| {
+                o.set_master(s.master);
+                o.set_blackout(s.blackout);
+            }),
         }
-        self.writer.wait(ticket).map_err(|e| {
-            format!(
-                "state not saved: {e}; the change is live, but a restart would not bring it back"
-            )
-        })
+        let mut pushes = Vec::new();
+        if outcome.push == Push::Echo {
+            pushes.extend(outcome.replies.iter().cloned());
+        }
+        if outcome.push != Push::Nobody {
+            pushes.extend(self.feedback(&s));
+        }
+        let ticket = (outcome.persist != Persist::No)
+            .then(|| self.writer.save(Snapshot::of(&self.stage.scene, &s)));
+        drop(s);
+        self.notify(&pushes);
+        if let Some(ticket) = ticket.filter(|_| outcome.persist == Persist::Now) {
+            self.writer.wait(ticket).map_err(|e| {
+                format!(
+                    "state not saved: {e}; the change is live, but a restart would not bring it back"
+                )
+            })?;
+        }
+        Ok(outcome.replies)
     }
 
     /// Changes the saved looks durably: `change` edits a copy (seeing the session), the
@@ -185,9 +205,11 @@ impl Engine {
         Ok(out)
     }
 
-    /// Stops the output (three Stream_Terminated packets per sACN universe) and writes the
-    /// state still queued.
+    /// Waits for the generates and exports still running, stops the output (three
+    /// Stream_Terminated packets per sACN universe) and writes the state still queued
+    /// (called by [`crate::shutdown::finish`]).
     pub fn shutdown(&self) {
+        self.threads.join();
         let out = self.output.lock().unwrap_or_else(|p| p.into_inner()).take();
         if let Some(out) = out {
             out.shutdown();
@@ -221,13 +243,17 @@ impl Engine {
         &self.references
     }
 
-    /// Reads and analyses a reference image from the references folder, refusing paths
-    /// that lead outside it (absolute paths, `..`, links). Slow for a big image.
-    pub fn load_reference(
+    /// Reads and analyses a reference image from the references folder for a new
+    /// objective, refusing paths that lead outside it (absolute paths, `..`, links). One at
+    /// a time, and slow for a big image: it runs on the sender's own handling thread with
+    /// the session unlocked, so a slow decode holds up only that sender, whose later
+    /// messages then see the objective.
+    pub fn read_objective(
         &self,
         name: &str,
         aspects: visobjd_method::objective::Aspects,
     ) -> Result<Objective, String> {
+        let _one_at_a_time = self.reading.lock().unwrap_or_else(|p| p.into_inner());
         let path = resolve_reference(&self.references, name)?;
         let img = decode_reference(&path).map_err(|e| format!("{name} {e}"))?;
         Ok(Objective {
@@ -240,45 +266,6 @@ impl Engine {
                 self.palette_size,
             ),
         })
-    }
-
-    /// Reads a reference and adds it as an objective (durably); its `/vo/objective/added`.
-    /// Runs on the sender's own handling thread, so a slow decode holds up only that
-    /// sender, whose later messages (a generate, say) then see the new objective.
-    pub fn add_objective(
-        &self,
-        image: &str,
-        aspects: visobjd_method::objective::Aspects,
-    ) -> Result<OscMessage, String> {
-        let objective = {
-            let _one_at_a_time = self.reading.lock().unwrap_or_else(|p| p.into_inner());
-            self.load_reference(image, aspects)?
-        };
-        self.install_objective(objective)
-    }
-
-    /// Adds a read objective to the session (durably); its `/vo/objective/added`.
-    fn install_objective(&self, objective: Objective) -> Result<OscMessage, String> {
-        let mut s = self.session();
-        let id = s.next_id;
-        s.next_id += 1;
-        let st = objective.analysis.stats;
-        let aspects = objective.aspects;
-        s.objectives.push(session::Entry { id, objective });
-        let feedback = self.feedback(&s);
-        let saved = self.persist(s, true);
-        self.notify(&feedback);
-        saved?;
-        Ok(msg(
-            "/vo/objective/added",
-            vec![
-                OscType::Int(id as i32),
-                OscType::String(aspects.name().to_string()),
-                OscType::Float(st.mean_l),
-                OscType::Float(st.key_l),
-                OscType::Float(st.bright),
-            ],
-        ))
     }
 
     /// Starts a generate on its own thread; the reply (`/vo/generated`) goes to `peer`
@@ -308,9 +295,7 @@ impl Engine {
         drop(s);
         let engine = Arc::clone(self);
         let peer = peer.clone();
-        let spawned = std::thread::Builder::new()
-            .name("generate".into())
-            .spawn(move || {
+        let spawned = self.threads.spawn("generate", move || {
                 // Whatever happens below, the next generate is allowed.
                 let _running = Running(&engine.generating);
                 engine.notify(&started_msgs);
@@ -391,9 +376,8 @@ impl Engine {
         let commands = crate::eos::preset_commands(&self.stage.scene, &self.session().live, n);
         let lights = self.stage.scene.lights.len();
         let (config, peer) = (self.eos.clone(), peer.clone());
-        std::thread::Builder::new()
-            .name("eos".into())
-            .spawn(move || {
+        self.threads
+            .spawn("eos", move || {
                 let reply = match crate::eos::push(&config, to, &commands) {
                     Ok(()) => msg(
                         "/vo/eos/preset",
@@ -579,13 +563,13 @@ impl Drop for Running<'_> {
 pub struct EngineHandler(pub Arc<Engine>);
 
 impl Handler for EngineHandler {
-    fn handle(&self, m: OscMessage, peer: &Peer) -> Vec<OscMessage> {
+    fn handle(&self, req: Request, peer: &Peer) -> Vec<OscMessage> {
         self.0.renew(peer);
-        match cmd::run(&self.0, &m, peer) {
+        match cmd::run(&self.0, &req, peer) {
             Ok(replies) => replies,
             Err(e) => {
-                tracing::info!("{} from {}: {e}", m.addr, peer.addr());
-                vec![error(&m.addr, &e)]
+                tracing::info!("{} from {}: {e}", req.addr, peer.addr());
+                vec![error(&req.addr, &e)]
             }
         }
     }

@@ -15,10 +15,10 @@ use std::time::Duration;
 use serde::{Deserialize, Serialize};
 
 use super::session::{Entry, Session};
-use visobjd_scene::look::LookFile;
+use visobjd_files::{Loaded, load_json, save_json};
 use visobjd_method::objective::ObjectiveRecord;
 use visobjd_scene::Scene;
-use visobjd_files::{Loaded, load_json, save_json};
+use visobjd_scene::look::LookFile;
 
 /// `live.json`: what the stage shows.
 #[derive(Debug, Clone, Serialize, Deserialize)]

@@ -5,10 +5,10 @@
 use std::collections::BTreeMap;
 
 use visobjd_method::gallery::Generation;
-use visobjd_scene::look::{Look, LookFile};
 use visobjd_method::objective::Objective;
 use visobjd_method::sampler::Constraints;
 use visobjd_scene::Scene;
+use visobjd_scene::look::{Look, LookFile};
 
 /// Base looks kept for undo (docs/osc.md; at least 32 were asked for).
 pub const HISTORY: usize = 64;

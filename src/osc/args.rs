@@ -31,6 +31,8 @@ pub const TRIGGERS: &[&str] = &[
 /// trailing numeric segments moved to the front of the arguments.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Request {
+    /// The address as received, for the `/vo/error` that names it.
+    pub addr: String,
     /// Lowercase path segments (`/VO/Pick/3` gives `["vo", "pick"]`).
     pub segments: Vec<String>,
     /// The arguments, trailing path numbers first.
@@ -38,8 +40,9 @@ pub struct Request {
 }
 
 impl Request {
-    /// Reads a received message by the rules above.
-    pub fn new(msg: &OscMessage) -> Request {
+    /// Reads a received message by the rules above (once, on the way in: the server, the
+    /// commands and the handler all see this same value).
+    pub fn new(msg: OscMessage) -> Request {
         let mut segments: Vec<String> = msg
             .addr
             .split('/')
@@ -59,8 +62,12 @@ impl Request {
                 Err(_) => OscType::Double(parse_number(s).unwrap_or_default()),
             })
             .collect();
-        args.extend(msg.args.iter().cloned());
-        Request { segments, args }
+        args.extend(msg.args);
+        Request {
+            addr: msg.addr,
+            segments,
+            args,
+        }
     }
 
     /// The address without its trailing numbers, lowercase (`/vo/pick`).
@@ -202,7 +209,7 @@ mod tests {
     use super::*;
 
     fn req(addr: &str, args: Vec<OscType>) -> Request {
-        Request::new(&OscMessage {
+        Request::new(OscMessage {
             addr: addr.into(),
             args,
         })

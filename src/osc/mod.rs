@@ -6,7 +6,7 @@
 //! ```text
 //! let server = osc::Server::start(&config.osc, Arc::new(engine_handler))?;
 //! let push = server.sender();            // subscriptions: push.send(addr, &msg)
-//! // Handler::handle(msg, &peer): let req = osc::args::Request::new(&msg);
+//! // Handler::handle(req, &peer): the message read once by osc::args::Request::new
 //! //   if let Some(ch) = req.matches("/vo/light/*/level") { ... args::number_in(..) ... }
 //! //   long work: keep peer.clone(), answer later with peer.reply(&[...]).
 //! ```

@@ -38,16 +38,16 @@ use crate::config::{Cidr, OscConfig};
 /// ([`Request::is_button_release`]). The returned messages are sent to the sender, in
 /// order. A panic in the handler is caught and answered with `/vo/error`.
 pub trait Handler: Send + Sync + 'static {
-    /// Answers one message.
-    fn handle(&self, msg: OscMessage, peer: &Peer) -> Vec<OscMessage>;
+    /// Answers one message, read once by the argument rules ([`Request::new`]).
+    fn handle(&self, req: Request, peer: &Peer) -> Vec<OscMessage>;
 }
 
 impl<F> Handler for F
 where
-    F: Fn(OscMessage, &Peer) -> Vec<OscMessage> + Send + Sync + 'static,
+    F: Fn(Request, &Peer) -> Vec<OscMessage> + Send + Sync + 'static,
 {
-    fn handle(&self, msg: OscMessage, peer: &Peer) -> Vec<OscMessage> {
-        self(msg, peer)
+    fn handle(&self, req: Request, peer: &Peer) -> Vec<OscMessage> {
+        self(req, peer)
     }
 }
 
@@ -406,12 +406,13 @@ impl Shared {
                     continue;
                 }
             };
-            if msg.args.len() <= 1 && Request::new(&msg).is_button_release() {
-                trace!("OSC: button release {} from {}", msg.addr, peer.addr);
+            let req = Request::new(msg);
+            if req.is_button_release() {
+                trace!("OSC: button release {} from {}", req.addr, peer.addr);
                 continue;
             }
-            let addr = msg.addr.clone();
-            match std::panic::catch_unwind(AssertUnwindSafe(|| self.handler.handle(msg, peer))) {
+            let addr = req.addr.clone();
+            match std::panic::catch_unwind(AssertUnwindSafe(|| self.handler.handle(req, peer))) {
                 Ok(r) => replies.extend(r),
                 Err(_) => {
                     error!("OSC: the handler panicked on {addr} from {}", peer.addr);

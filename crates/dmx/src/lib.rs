@@ -30,8 +30,8 @@ use tokio::sync::watch;
 use uuid::Uuid;
 
 use crate::patch::SLOTS;
-use visobjd_scene::look::Look;
 use config::SacnTarget;
+use visobjd_scene::look::Look;
 use wire::SacnSource;
 
 /// Why the output could not start.

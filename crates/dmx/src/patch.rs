@@ -4,9 +4,9 @@
 //! exact value, and a 16-bit intensity fades as one 16-bit number rather than as a coarse
 //! byte that jumps and a fine byte that saws.
 
-use visobjd_scene::profile::Slot;
-use visobjd_scene::look::{Level, Look};
 use visobjd_scene::Scene;
+use visobjd_scene::look::{Level, Look};
+use visobjd_scene::profile::Slot;
 
 /// Slots in a DMX universe.
 pub const SLOTS: usize = 512;

@@ -7,11 +7,11 @@
 use rand::Rng;
 use rayon::prelude::*;
 
+use crate::sampler::Plan;
 use visobjd_compositor::basis::BasisImages;
 use visobjd_compositor::color::linear_to_lab_planar;
-use visobjd_scene::look::Look;
 use visobjd_compositor::render::{Kernel, STRIP, composite_with, weights, zeroed_outputs};
-use crate::sampler::Plan;
+use visobjd_scene::look::Look;
 
 /// Width of the proxy renders distances are measured on: "small", as docs/method.md says (the
 /// prototype's were 100x100). 96 x 54 on a 16:9 stage has a third fewer pixels to render,

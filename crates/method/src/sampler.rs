@@ -10,10 +10,10 @@ use rand::Rng;
 use rand::seq::SliceRandom;
 use rand_distr::{Distribution, Normal};
 
-use visobjd_compositor::color::srgb_to_lab;
-use visobjd_scene::srgb::{linear_to_srgb, srgb_to_linear};
-use visobjd_scene::look::Look;
 use crate::objective::{Aspects, PaletteColor, nearest};
+use visobjd_compositor::color::srgb_to_lab;
+use visobjd_scene::look::Look;
+use visobjd_scene::srgb::{linear_to_srgb, srgb_to_linear};
 
 /// The rig as the sampler sees it.
 #[derive(Debug, Clone)]

@@ -3,14 +3,14 @@
 
 use std::path::Path;
 
-use visobjd_compositor::basis::{self, BasisImages, Precision};
 use crate::gallery::{Generation, PROXY_WIDTH, Size};
-use visobjd_scene::look::Look;
 use crate::objective::Objective;
-use visobjd_compositor::render::{exposure_gain, render_srgb8};
 use crate::sampler::{Constraints, Plan, Rig, Spread, Target};
-use visobjd_scene::{Scene, SceneError};
 use crate::targeting::{Footprints, WORKING_WIDTH};
+use visobjd_compositor::basis::{self, BasisImages, Precision};
+use visobjd_compositor::render::{exposure_gain, render_srgb8};
+use visobjd_scene::look::Look;
+use visobjd_scene::{Scene, SceneError};
 
 /// Default thumbnail width: the paper's gallery thumbnails are 480 px wide.
 pub const THUMB_WIDTH: usize = 480;

@@ -5,8 +5,8 @@
 
 use rayon::prelude::*;
 
-use visobjd_compositor::basis::BasisImages;
 use crate::objective::Region;
+use visobjd_compositor::basis::BasisImages;
 
 /// Width the footprints are analysed at (docs/method.md, "Region targeting").
 pub const WORKING_WIDTH: usize = 128;

@@ -5,8 +5,8 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::srgb::srgb_to_linear;
 use crate::Scene;
+use crate::srgb::srgb_to_linear;
 
 /// One light's setting. `color` is sRGB 0..1 with the brightness carried by
 /// `intensity`; lights without colour keep white.

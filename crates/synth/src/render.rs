@@ -1,8 +1,8 @@
 //! Lighting: direct light from a soft-edged spot with hard shadows, plus one diffuse bounce
 //! gathered from virtual point lights placed where the beam lands.
 
-use visobjd_scene::srgb::srgb_to_linear;
 use std::f32::consts::PI;
+use visobjd_scene::srgb::srgb_to_linear;
 
 use rayon::prelude::*;
 
