@@ -218,7 +218,11 @@ fn replies_carry_the_contract_types() {
     let r = d.ok("/vo/status", vec![], "/vo/status");
     // The session, the output's health, and a label and count per destination (one sACN,
     // one Art-Net).
-    assert_eq!(tags(&r), format!("siiiiifif{}{}", "fii", "si".repeat(2)), "{r:?}");
+    assert_eq!(
+        tags(&r),
+        format!("siiiiifif{}{}", "fii", "si".repeat(2)),
+        "{r:?}"
+    );
     let r = d.ok(
         "/vo/objective/add",
         vec![string("grey.png")],
