@@ -297,7 +297,7 @@ impl Engine {
         let peer = peer.clone();
         let spawned = self.threads.spawn("generate", move || {
                 // Whatever happens below, the next generate is allowed.
-                let _running = Running(&engine.generating);
+                let running = Running(&engine.generating);
                 engine.notify(&started_msgs);
                 let started = Instant::now();
                 let drawn = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
@@ -322,6 +322,8 @@ impl Engine {
                         "/vo/generate",
                         &format!("the generate failed (an internal error, logged with seed {seed}); the gallery is unchanged, generate again"),
                     );
+                    // Free before the answer: the requester may generate again at once.
+                    drop(running);
                     peer.reply(std::slice::from_ref(&e));
                     return;
                 };
