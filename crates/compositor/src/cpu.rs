@@ -10,8 +10,8 @@
 //! Non-temporal stores (`_mm_stream_*`, `_mm512_stream_*`) are weakly ordered: the thread
 //! that issued them must fence (`_mm_sfence`) before anything else touches the memory
 //! they wrote, or even a later release (rayon's join) does not publish them. Functions
-//! that stream take a [`NonTemporal`], which only [`non_temporal`] makes and whose scope
-//! ends with that fence, on the same thread.
+//! that stream take a `NonTemporal` (crate-private), which only the scope `non_temporal`
+//! lends, and that scope ends with the fence, on the same thread.
 
 use std::marker::PhantomData;
 

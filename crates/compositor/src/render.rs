@@ -78,7 +78,9 @@ pub fn weights(looks: &[&Look], gain: f32) -> Vec<Vec<[f32; 3]>> {
 ///
 /// The SIMD variants carry the token of their CPU features ([`crate::cpu`]), which only
 /// that token's `detect` makes: no safe code can choose a kernel this CPU does not run. Get
-/// one from [`Kernel::detect`], [`Kernel::all`], or as `Kernel::Avx512(token)`.
+/// one from [`Kernel::detect`], [`Kernel::all`], or as `Kernel::Avx512(token)`. (This is
+/// why there is no constant list of every kernel, nor a `supported()` to ask: a kernel
+/// value is itself the answer.)
 #[derive(Clone, Copy, PartialEq, Eq)]
 pub enum Kernel {
     /// Plain Rust the compiler vectorises for the baseline target: runs anywhere.
