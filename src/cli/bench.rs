@@ -66,11 +66,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // Compositor rows, to be set against the run's bound once it is known. Every kernel
     // this CPU runs, the dispatched one last: its thumbnail row is the one with a target
     // (what a generate renders), its linear-float row is for comparison.
+    // Kernels come only from their checked constructors: one this CPU lacks is `None`.
+    let kernels = Kernel::all();
+    for (name, k) in kernels {
+        if k.is_none() && !args.quick {
+            println!("note: this CPU lacks the {name} kernel; its rows are skipped");
+        }
+    }
     let mut compositor_rows = Vec::new();
     for (name, stage) in [("44", &demo), ("267", &big)] {
-        let others = Kernel::ALL
+        let others = kernels
             .into_iter()
-            .filter(|k| k.supported() && *k != kernel);
+            .filter_map(|(_, k)| k)
+            .filter(|k| *k != kernel);
         let runs = others
             .filter(|_| !args.quick)
             .map(|k| (k, Product::Thumbnails))
@@ -278,8 +286,11 @@ fn fma_rate(kernel: Kernel) -> f64 {
 fn fma_loop(kernel: Kernel, iters: u64) -> u64 {
     match kernel {
         #[cfg(target_arch = "x86_64")]
-        // SAFETY: `kernel` came from `Kernel::detect`, so its features are present.
-        Kernel::Avx512 | Kernel::Avx2 => unsafe { peak::fma_loop(kernel == Kernel::Avx512, iters) },
+        // SAFETY: the token exists, so the CPU has AVX-512F.
+        Kernel::Avx512(t) => unsafe { peak::avx512(t, iters) },
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: the token exists, so the CPU has AVX2 and FMA.
+        Kernel::Avx2(t) => unsafe { peak::avx2(t, iters) },
         _ => {
             let mut acc = [1.0f32; 48];
             for _ in 0..iters / 4 {
@@ -297,23 +308,14 @@ fn fma_loop(kernel: Kernel, iters: u64) -> u64 {
 mod peak {
     use std::arch::x86_64::*;
 
+    use visobjd_compositor::cpu::{Avx2Fma, Avx512F};
+
     /// 12 chains are more than latency x throughput of any current FMA unit.
     const CHAINS: usize = 12;
 
-    /// # Safety
-    /// The CPU must have AVX-512F when `wide`, else AVX2 and FMA.
-    pub(super) unsafe fn fma_loop(wide: bool, iters: u64) -> u64 {
-        if wide {
-            // SAFETY: the caller checked AVX-512F.
-            unsafe { avx512(iters) }
-        } else {
-            // SAFETY: the caller checked AVX2 and FMA.
-            unsafe { avx2(iters) }
-        }
-    }
-
+    /// The token is the caller's proof of the feature.
     #[target_feature(enable = "avx512f")]
-    fn avx512(iters: u64) -> u64 {
+    pub(super) fn avx512(_: Avx512F, iters: u64) -> u64 {
         let (m, a) = (_mm512_set1_ps(0.999_999), _mm512_set1_ps(1e-7));
         let mut c = [_mm512_set1_ps(1.0); CHAINS];
         for _ in 0..iters {
@@ -325,8 +327,9 @@ mod peak {
         iters * (CHAINS * 16 * 2) as u64
     }
 
+    /// The token is the caller's proof of the features.
     #[target_feature(enable = "avx2,fma")]
-    fn avx2(iters: u64) -> u64 {
+    pub(super) fn avx2(_: Avx2Fma, iters: u64) -> u64 {
         let (m, a) = (_mm256_set1_ps(0.999_999), _mm256_set1_ps(1e-7));
         let mut c = [_mm256_set1_ps(1.0); CHAINS];
         for _ in 0..iters {

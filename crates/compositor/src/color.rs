@@ -4,6 +4,9 @@
 
 use visobjd_scene::srgb::{linear_to_srgb_f64, srgb_to_linear};
 
+#[cfg(target_arch = "x86_64")]
+use crate::cpu::{Avx2Fma, Avx512F};
+
 /// CIELAB (D65 white) of a linear-light RGB colour: L* in 0..100.
 pub fn linear_to_lab(rgb: [f32; 3]) -> [f32; 3] {
     let [r, g, b] = rgb;
@@ -21,25 +24,27 @@ pub fn linear_to_lab(rgb: [f32; 3]) -> [f32; 3] {
 /// bit for bit).
 pub fn linear_to_lab_planar(rgb: [&[f32]; 3], lab: &mut [f32]) {
     #[cfg(target_arch = "x86_64")]
-    if is_x86_feature_detected!("avx512f") {
-        // SAFETY: AVX-512F was just detected.
-        return unsafe { lab_planar_avx512(rgb, lab) };
-    } else if is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma") {
-        // SAFETY: AVX2 and FMA were just detected.
-        return unsafe { lab_planar_avx2(rgb, lab) };
+    if let Some(t) = Avx512F::detect() {
+        // SAFETY: the token exists, so the CPU has AVX-512F and FMA.
+        return unsafe { lab_planar_avx512(t, rgb, lab) };
+    } else if let Some(t) = Avx2Fma::detect() {
+        // SAFETY: the token exists, so the CPU has AVX2 and FMA.
+        return unsafe { lab_planar_avx2(t, rgb, lab) };
     }
     lab_planar::<{ cfg!(target_feature = "fma") }>(rgb, lab);
 }
 
+/// The token is the caller's proof of the features.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,fma")]
-fn lab_planar_avx512(rgb: [&[f32]; 3], lab: &mut [f32]) {
+fn lab_planar_avx512(_: Avx512F, rgb: [&[f32]; 3], lab: &mut [f32]) {
     lab_planar::<true>(rgb, lab);
 }
 
+/// The token is the caller's proof of the features.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-fn lab_planar_avx2(rgb: [&[f32]; 3], lab: &mut [f32]) {
+fn lab_planar_avx2(_: Avx2Fma, rgb: [&[f32]; 3], lab: &mut [f32]) {
     lab_planar::<true>(rgb, lab);
 }
 
@@ -298,15 +303,63 @@ mod x86 {
     use std::arch::x86_64::*;
 
     use super::{KEY_BASE, encode_table};
+    use crate::cpu::{Avx2Fma, Avx512F, NonTemporal};
 
     /// The widest encoder this CPU runs; returns the pixels it did.
     pub(super) fn encode(rgb: [&[f32]; 3], out: &mut [u8]) -> usize {
-        static BEST: std::sync::OnceLock<Option<Path>> = std::sync::OnceLock::new();
-        match BEST.get_or_init(|| paths().first().map(|p| p.1)) {
-            // SAFETY: paths() lists only encoders whose features this CPU has.
-            Some(path) => unsafe { path(rgb, out) },
+        static BEST: std::sync::OnceLock<Option<Encoder>> = std::sync::OnceLock::new();
+        match BEST.get_or_init(|| encoders().first().copied()) {
+            Some(encoder) => encoder.encode(rgb, out),
             None => 0,
         }
+    }
+
+    /// A SIMD encoder, with the token of its features: only made where the CPU has them.
+    #[derive(Clone, Copy)]
+    #[allow(
+        clippy::large_enum_variant,
+        reason = "one lives in a static and is used by reference; a Vbmi is the table it loads"
+    )]
+    pub(super) enum Encoder {
+        Vbmi(Vbmi),
+        Avx512(Avx512F),
+        Avx2(Avx2Fma),
+    }
+
+    impl Encoder {
+        /// Pixels per vector.
+        #[cfg(test)]
+        pub(super) fn lanes(self) -> usize {
+            match self {
+                Encoder::Vbmi(_) => 32,
+                Encoder::Avx512(_) => 16,
+                Encoder::Avx2(_) => 8,
+            }
+        }
+
+        /// Encodes whole vectors of pixels into `out`; returns how many it did.
+        pub(super) fn encode(&self, rgb: [&[f32]; 3], out: &mut [u8]) -> usize {
+            match *self {
+                // SAFETY: the Vbmi exists, so the CPU has AVX-512 F, BW, VBMI and VBMI2.
+                Encoder::Vbmi(ref vbmi) => unsafe { encode_avx512_vbmi(vbmi, rgb, out) },
+                // SAFETY: the token exists, so the CPU has AVX-512F.
+                Encoder::Avx512(t) => unsafe { encode_avx512(t, rgb, out) },
+                // SAFETY: the token exists, so the CPU has AVX2.
+                Encoder::Avx2(t) => unsafe { encode_avx2(t, rgb, out) },
+            }
+        }
+    }
+
+    /// Every SIMD encoder this CPU runs, widest first.
+    pub(super) fn encoders() -> Vec<Encoder> {
+        [
+            Vbmi::new().map(Encoder::Vbmi),
+            Avx512F::detect().map(Encoder::Avx512),
+            Avx2Fma::detect().map(Encoder::Avx2),
+        ]
+        .into_iter()
+        .flatten()
+        .collect()
     }
 
     /// The byte of value v's code (0..32) in [`Vbmi::words`]: `vpackusdw` packs per
@@ -462,10 +515,12 @@ mod x86 {
         /// render, and the thumbnails are read much later anyway. The lines at the ends,
         /// which neighbouring strips share, are written normally.
         ///
-        /// Before another thread reads `out`, this one must fence (`_mm_sfence`).
+        /// The line stores are fenced when `nt`'s scope ends: a fence here, per candidate and
+        /// strip, would cost more than the stores save.
         #[inline(always)]
         pub(crate) fn stream_interleaved(
             self,
+            _: &NonTemporal,
             planes: [&[u8; 96]; 2],
             blue: &[__m512; 6],
             out: &mut [u8],
@@ -557,13 +612,13 @@ mod x86 {
 
     /// With VBMI: 32 pixels at a time in 16-bit lanes, two byte permutes per 64 bytes out.
     #[target_feature(enable = "avx512f,avx512bw,avx512vbmi,avx512vbmi2")]
-    fn encode_avx512_vbmi(rgb: [&[f32]; 3], out: &mut [u8]) -> usize {
+    fn encode_avx512_vbmi(vbmi: &Vbmi, rgb: [&[f32]; 3], out: &mut [u8]) -> usize {
+        let vbmi = *vbmi;
         const INDEX: [[[u8; 64]; 2]; 2] = [
             [interleave_index(0, false), interleave_index(0, true)],
             [interleave_index(1, false), interleave_index(1, true)],
         ];
         let n = rgb.iter().fold(out.len() / 3, |n, p| n.min(p.len())) / 32 * 32;
-        let vbmi = Vbmi::load();
         // SAFETY: each index is 64 bytes.
         let [[rg_lo, b_lo], [rg_hi, b_hi]] =
             INDEX.map(|h| h.map(|i| unsafe { _mm512_loadu_si512(i.as_ptr().cast()) }));
@@ -623,7 +678,7 @@ mod x86 {
     /// group of 4 pixels p are then p[m] >> 8m | p[m + 1] << (24 - 8m) for m = 0, 1, 2: two
     /// permutes and two variable shifts for a whole vector, and a masked store of 3/4 of it.
     #[target_feature(enable = "avx512f")]
-    fn encode_avx512(rgb: [&[f32]; 3], out: &mut [u8]) -> usize {
+    fn encode_avx512(_: Avx512F, rgb: [&[f32]; 3], out: &mut [u8]) -> usize {
         let n = rgb.iter().fold(out.len() / 3, |n, p| n.min(p.len())) / 16 * 16;
         // SAFETY: each table row holds 32 dwords: lanes 0..16 and 16..32 are inside.
         let table = encode_table()
@@ -652,7 +707,7 @@ mod x86 {
     /// 8 lanes of the 32-bit arithmetic; AVX2 has no two-table permute, so the table is
     /// gathered (it is in cache).
     #[target_feature(enable = "avx2")]
-    fn encode_avx2(rgb: [&[f32]; 3], out: &mut [u8]) -> usize {
+    fn encode_avx2(_: Avx2Fma, rgb: [&[f32]; 3], out: &mut [u8]) -> usize {
         let n = rgb.iter().fold(out.len() / 3, |n, p| n.min(p.len())) / 8 * 8;
         let table = &encode_table().dwords;
         let code = |plane: &[f32], i: usize| {
@@ -699,22 +754,6 @@ mod x86 {
         }
         n
     }
-
-    /// A SIMD encoder: sound to call only where its target features are present.
-    pub(super) type Path = unsafe fn([&[f32]; 3], &mut [u8]) -> usize;
-
-    /// Every SIMD encoder this CPU runs, widest first, with its lanes.
-    pub(super) fn paths() -> Vec<(usize, Path)> {
-        let all: [(bool, usize, Path); 3] = [
-            (Vbmi::new().is_some(), 32, encode_avx512_vbmi),
-            (is_x86_feature_detected!("avx512f"), 16, encode_avx512),
-            (is_x86_feature_detected!("avx2"), 8, encode_avx2),
-        ];
-        all.into_iter()
-            .filter(|p| p.0)
-            .map(|p| (p.1, p.2))
-            .collect()
-    }
 }
 
 #[cfg(test)]
@@ -756,7 +795,8 @@ mod tests {
     #[test]
     fn fast_lab_is_within_a_thousandth_of_delta_e() {
         // Checks one path; those with FMA must also give the portable FMA path's bits.
-        let check = |name: &str, fused: bool, path: unsafe fn([&[f32]; 3], &mut [f32])| {
+        type Path<'a> = &'a dyn Fn([&[f32]; 3], &mut [f32]);
+        let check = |name: &str, fused: bool, path: Path| {
             let mut worst = 0.0f32;
             let steps = 40;
             for ri in 0..=steps {
@@ -766,8 +806,7 @@ mod tests {
                     let g = vec![(gi as f32 / steps as f32).powi(3); n];
                     let b: Vec<f32> = (0..n).map(|k| (k as f32 / steps as f32).powi(2)).collect();
                     let mut lab = vec![0.0; 3 * n];
-                    // SAFETY: only paths whose features were detected are checked.
-                    unsafe { path([&r, &g, &b], &mut lab) };
+                    path([&r, &g, &b], &mut lab);
                     for k in 0..n {
                         let want = linear_to_lab([r[k], g[k], b[k]]);
                         let got = [lab[k], lab[n + k], lab[2 * n + k]];
@@ -782,15 +821,23 @@ mod tests {
             }
             assert!(worst < 1e-3, "{name}: worst Delta-E {worst}");
         };
-        check("dispatched", false, linear_to_lab_planar);
-        check("portable", false, lab_planar::<false>);
+        check("dispatched", false, &linear_to_lab_planar);
+        check("portable", false, &lab_planar::<false>);
         #[cfg(target_arch = "x86_64")]
         {
-            if is_x86_feature_detected!("avx512f") {
-                check("avx512", true, lab_planar_avx512);
+            match Avx512F::detect() {
+                // SAFETY: the token exists, so the CPU has AVX-512F and FMA.
+                Some(t) => check("avx512", true, &|rgb, lab| unsafe {
+                    lab_planar_avx512(t, rgb, lab)
+                }),
+                None => eprintln!("note: this CPU lacks AVX-512F; its path is not checked"),
             }
-            if is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma") {
-                check("avx2", true, lab_planar_avx2);
+            match Avx2Fma::detect() {
+                // SAFETY: the token exists, so the CPU has AVX2 and FMA.
+                Some(t) => check("avx2", true, &|rgb, lab| unsafe {
+                    lab_planar_avx2(t, rgb, lab)
+                }),
+                None => eprintln!("note: this CPU lacks AVX2 or FMA; its path is not checked"),
             }
         }
         for x in [1e-6f32, 0.008, 0.3, 1.0, 1.2] {
@@ -901,10 +948,10 @@ mod tests {
             assert_eq!(out, want, "{n} pixels");
             // Each SIMD path on its own: its whole vectors, and not a byte past them.
             #[cfg(target_arch = "x86_64")]
-            for (lanes, path) in x86::paths() {
+            for encoder in x86::encoders() {
+                let lanes = encoder.lanes();
                 let mut out = vec![0xA5u8; 3 * n];
-                // SAFETY: paths() lists only paths whose features were detected.
-                let done = unsafe { path([&r, &g, &b], &mut out) };
+                let done = encoder.encode([&r, &g, &b], &mut out);
                 assert_eq!(done, n / lanes * lanes);
                 assert_eq!(
                     out[..3 * done],
@@ -929,7 +976,8 @@ mod tests {
                 // SAFETY: lanes 16j..16j + 16 of 96 are inside; the features are enabled.
                 unsafe { std::arch::x86_64::_mm512_loadu_ps(blue.as_ptr().add(16 * j)) }
             });
-            vbmi.stream_interleaved(planes, &blue, out);
+            // The scope fences before the test reads `out`.
+            crate::cpu::non_temporal(|nt| vbmi.stream_interleaved(nt, planes, &blue, out));
         }
         #[repr(align(64))]
         struct Lines([u8; 512]);
@@ -949,7 +997,7 @@ mod tests {
             for n in lengths {
                 let mut buf = Lines([0xEE; 512]);
                 let start = 64 + off;
-                // SAFETY: a Vbmi exists only where the CPU has the features.
+                // SAFETY: the Vbmi exists, so the CPU has the features.
                 unsafe {
                     stream(
                         vbmi,

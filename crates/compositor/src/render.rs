@@ -17,6 +17,7 @@ use rayon::prelude::*;
 
 use crate::basis::{BasisImages, Panel};
 use crate::color::encode_srgb8_planar;
+use crate::cpu::{Avx2Fma, Avx512F, NonTemporal, non_temporal};
 use visobjd_scene::look::Look;
 
 /// Pixels per strip: six 16-lane AVX-512 vectors, the width of the register block.
@@ -74,39 +75,48 @@ pub fn weights(looks: &[&Look], gain: f32) -> Vec<Vec<[f32; 3]>> {
 
 /// A micro-kernel implementation; all compute the same sums (FMA or not), to within 1e-4
 /// of [`render_reference`].
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+///
+/// The SIMD variants carry the token of their CPU features ([`crate::cpu`]), which only
+/// that token's `detect` makes: no safe code can choose a kernel this CPU does not run. Get
+/// one from [`Kernel::detect`], [`Kernel::all`], or as `Kernel::Avx512(token)`. (This is
+/// why there is no constant list of every kernel, nor a `supported()` to ask: a kernel
+/// value is itself the answer.)
+#[derive(Clone, Copy, PartialEq, Eq)]
 pub enum Kernel {
     /// Plain Rust the compiler vectorises for the baseline target: runs anywhere.
     Portable,
     /// 256-bit AVX2 with FMA (x86-64 from about 2013).
-    Avx2,
+    Avx2(Avx2Fma),
     /// 512-bit AVX-512F (Zen 4, Intel server parts).
-    Avx512,
+    Avx512(Avx512F),
 }
 
 impl Kernel {
-    /// Every kernel, slowest first (for tests and the benchmark).
-    pub const ALL: [Kernel; 3] = [Kernel::Portable, Kernel::Avx2, Kernel::Avx512];
-
     /// The widest kernel this CPU runs.
     pub fn detect() -> Kernel {
-        Kernel::ALL
+        Kernel::all()
             .into_iter()
             .rev()
-            .find(|k| k.supported())
+            .find_map(|(_, k)| k)
             .unwrap_or(Kernel::Portable)
     }
 
-    /// Whether this CPU can run the kernel.
-    pub fn supported(self) -> bool {
+    /// Every kernel by name, slowest first, each `None` where this CPU lacks its features
+    /// (for tests and the benchmark, which compare the paths and note the ones skipped).
+    pub fn all() -> [(&'static str, Option<Kernel>); 3] {
+        [
+            ("Portable", Some(Kernel::Portable)),
+            ("Avx2", Avx2Fma::detect().map(Kernel::Avx2)),
+            ("Avx512", Avx512F::detect().map(Kernel::Avx512)),
+        ]
+    }
+
+    /// The kernel's name, as [`Kernel::all`] gives it.
+    pub fn name(self) -> &'static str {
         match self {
-            Kernel::Portable => true,
-            #[cfg(target_arch = "x86_64")]
-            Kernel::Avx2 => is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma"),
-            #[cfg(target_arch = "x86_64")]
-            Kernel::Avx512 => is_x86_feature_detected!("avx512f"),
-            #[cfg(not(target_arch = "x86_64"))]
-            _ => false,
+            Kernel::Portable => "Portable",
+            Kernel::Avx2(_) => "Avx2",
+            Kernel::Avx512(_) => "Avx512",
         }
     }
 
@@ -114,13 +124,20 @@ impl Kernel {
     fn block(self, call: Call, acc: &mut Acc) {
         match self {
             #[cfg(target_arch = "x86_64")]
-            // SAFETY: `composite_with` only runs kernels whose `supported()` is true.
-            Kernel::Avx512 => unsafe { x86::block_avx512(call, acc) },
+            // SAFETY: the token exists, so the CPU has AVX-512F.
+            Kernel::Avx512(t) => unsafe { x86::block_avx512(t, call, acc) },
             #[cfg(target_arch = "x86_64")]
-            // SAFETY: as above: AVX2 and FMA were detected.
-            Kernel::Avx2 => unsafe { x86::block_avx2(call, acc) },
+            // SAFETY: the token exists, so the CPU has AVX2 and FMA.
+            Kernel::Avx2(t) => unsafe { x86::block_avx2(t, call, acc) },
             _ => block_portable(call, acc),
         }
+    }
+}
+
+/// The name alone: the tokens say nothing more.
+impl std::fmt::Debug for Kernel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
     }
 }
 
@@ -205,6 +222,7 @@ mod x86 {
 
     use super::{Acc, Call, Codes, MR, STRIP};
     use crate::color::Vbmi;
+    use crate::cpu::{Avx2Fma, Avx512F, NonTemporal};
 
     /// Zmm vectors per row.
     const V: usize = STRIP / 16;
@@ -247,9 +265,10 @@ mod x86 {
         }
     }
 
-    /// The register block with its sums stored to `acc`.
+    /// The register block with its sums stored to `acc`. The token is the caller's proof
+    /// of the features.
     #[target_feature(enable = "avx512f")]
-    pub(super) fn block_avx512(call: Call, acc: &mut Acc) {
+    pub(super) fn block_avx512(_: Avx512F, call: Call, acc: &mut Acc) {
         // SAFETY: this function's features include AVX-512F.
         let c = unsafe { sums_avx512(call, acc) };
         for (a, c) in acc.iter_mut().zip(&c) {
@@ -278,12 +297,13 @@ mod x86 {
 
     /// The register block's blue sums encoded straight from the registers and interleaved
     /// with its red and green code planes into each candidate's output's `local` bytes,
-    /// whole cache lines with non-temporal stores (`run` fences at the end of each task).
+    /// whole cache lines with non-temporal stores (fenced when `nt`'s scope ends).
     #[target_feature(enable = "avx512f,avx512bw,avx512vbmi,avx512vbmi2")]
     pub(super) fn emit_avx512(
         call: Call,
         acc: &Acc,
         vbmi: Vbmi,
+        nt: &NonTemporal,
         codes: &[Codes; 2],
         outs: &mut [&mut [u8]],
         local: std::ops::Range<usize>,
@@ -295,13 +315,13 @@ mod x86 {
         // measured the same, and with a closure the closure was called, not inlined.
         for (r, out) in outs.iter_mut().enumerate() {
             let planes = [&codes[0][r], &codes[1][r]];
-            vbmi.stream_interleaved(planes, &c[r], &mut out[local.clone()]);
+            vbmi.stream_interleaved(nt, planes, &c[r], &mut out[local.clone()]);
         }
     }
 
     /// Four passes of 4 candidates x 24 pixels (12 ymm accumulators of 16 registers).
     #[target_feature(enable = "avx2,fma")]
-    pub(super) fn block_avx2(call: Call, acc: &mut Acc) {
+    pub(super) fn block_avx2(_: Avx2Fma, call: Call, acc: &mut Acc) {
         const V: usize = 3;
         const PARTS: usize = STRIP / (8 * V);
         call.ahead.touch_all();
@@ -342,7 +362,7 @@ mod x86 {
 
     /// Half to single precision, 16 lanes at a time.
     #[target_feature(enable = "avx512f")]
-    pub(super) fn widen_avx512(src: &[f16], dst: &mut [f32]) {
+    pub(super) fn widen_avx512(_: Avx512F, src: &[f16], dst: &mut [f32]) {
         assert_eq!(src.len(), dst.len());
         let n = src.len() / 16 * 16;
         for i in (0..n).step_by(16) {
@@ -383,7 +403,11 @@ mod x86 {
     /// two permutes per output vector; returns the pixels done (the rest is left to the
     /// caller).
     #[target_feature(enable = "avx512f")]
-    pub(super) fn interleave_clamped_avx512(rgb: [&[f32]; 3], out: &mut [f32]) -> usize {
+    pub(super) fn interleave_clamped_avx512(
+        _: Avx512F,
+        rgb: [&[f32]; 3],
+        out: &mut [f32],
+    ) -> usize {
         const RG: [[i32; 16]; 3] = [
             interleave_index(0, false),
             interleave_index(1, false),
@@ -428,13 +452,15 @@ mod x86 {
     /// Copies `src` into `dst`, the middle of `dst` (aligned to `LANES` floats) with
     /// `store`, a non-temporal store of `LANES` floats: outputs written once and read much
     /// later should not evict the basis panel. The ends are copied normally (a neighbouring
-    /// strip owns the rest of their cache lines).
+    /// strip owns the rest of their cache lines). The stores are fenced when `nt`'s scope
+    /// ends.
     ///
     /// # Safety
     /// `store(d, s)` must be sound wherever `d` is aligned to `LANES` floats and `LANES`
     /// floats are writable at `d` and readable at `s`.
     #[inline(always)]
     unsafe fn stream_lanes<const LANES: usize>(
+        _: &NonTemporal,
         dst: &mut [f32],
         src: &[f32],
         store: impl Fn(*mut f32, *const f32),
@@ -452,25 +478,18 @@ mod x86 {
     }
 
     /// [`stream_lanes`] with 16-byte SSE stores (baseline x86-64).
-    pub(super) fn stream_copy(dst: &mut [f32], src: &[f32]) {
+    pub(super) fn stream_copy(nt: &NonTemporal, dst: &mut [f32], src: &[f32]) {
         // SAFETY: `_mm_stream_ps` needs the 16-byte alignment stream_lanes::<4> gives, and 4
         // floats each side, which it guarantees.
-        unsafe { stream_lanes::<4>(dst, src, |d, s| _mm_stream_ps(d, _mm_loadu_ps(s))) }
+        unsafe { stream_lanes::<4>(nt, dst, src, |d, s| _mm_stream_ps(d, _mm_loadu_ps(s))) }
     }
 
     /// [`stream_lanes`] a whole cache line per store: a quarter of the SSE stores.
     #[target_feature(enable = "avx512f")]
-    pub(super) fn stream_copy_avx512(dst: &mut [f32], src: &[f32]) {
+    pub(super) fn stream_copy_avx512(_: Avx512F, nt: &NonTemporal, dst: &mut [f32], src: &[f32]) {
         // SAFETY: `_mm512_stream_ps` needs the 64-byte alignment stream_lanes::<16> gives,
-        // and 16 floats each side, which it guarantees.
-        unsafe { stream_lanes::<16>(dst, src, |d, s| _mm512_stream_ps(d, _mm512_loadu_ps(s))) }
-    }
-
-    /// Orders this thread's non-temporal stores before whatever it does next (rayon's
-    /// join then publishes them).
-    pub(super) fn store_fence() {
-        // SAFETY: SSE is baseline on x86-64; the fence has no memory-safety preconditions.
-        unsafe { _mm_sfence() };
+        // and 16 floats each side, which it guarantees; AVX-512F is this function's.
+        unsafe { stream_lanes::<16>(nt, dst, src, |d, s| _mm512_stream_ps(d, _mm512_loadu_ps(s))) }
     }
 }
 
@@ -480,8 +499,8 @@ fn widen(kernel: Kernel, src: &[f16], dst: &mut [Row]) {
     let dst = dst.as_flattened_mut();
     match kernel {
         #[cfg(target_arch = "x86_64")]
-        // SAFETY: `composite_with` only runs kernels whose `supported()` is true.
-        Kernel::Avx512 => unsafe { x86::widen_avx512(src, dst) },
+        // SAFETY: the token exists, so the CPU has AVX-512F.
+        Kernel::Avx512(t) => unsafe { x86::widen_avx512(t, src, dst) },
         _ => src.convert_to_f32_slice(dst),
     }
 }
@@ -512,37 +531,47 @@ pub fn composite_clamped(
     weights: &[Vec<[f32; 3]>],
     outputs: &mut [Vec<f32>],
 ) {
-    composite_with(kernel, basis, weights, outputs, |rgb, out| {
-        let mut buf = [0.0f32; STRIP * 3];
-        let n = out.len() / 3;
-        let mut done = 0;
-        #[cfg(target_arch = "x86_64")]
-        if kernel == Kernel::Avx512 {
-            // SAFETY: composite_with asserted that this kernel's features are present.
-            done = unsafe { x86::interleave_clamped_avx512(rgb, &mut buf[..n * 3]) };
-        }
-        for (i, px) in buf[..n * 3].chunks_exact_mut(3).enumerate().skip(done) {
-            px[0] = rgb[0][i].clamp(0.0, 1.0);
-            px[1] = rgb[1][i].clamp(0.0, 1.0);
-            px[2] = rgb[2][i].clamp(0.0, 1.0);
-        }
-        #[cfg(target_arch = "x86_64")]
-        if kernel == Kernel::Avx512 {
-            // SAFETY: as above.
-            unsafe { x86::stream_copy_avx512(out, &buf) };
-        } else {
-            x86::stream_copy(out, &buf);
-        }
-        #[cfg(not(target_arch = "x86_64"))]
-        out.copy_from_slice(&buf[..out.len()]);
-    });
+    emit_chunked(
+        kernel,
+        basis,
+        weights,
+        outputs,
+        CHUNK_LIGHTS,
+        |rgb, out, nt| {
+            let mut buf = [0.0f32; STRIP * 3];
+            let n = out.len() / 3;
+            let mut done = 0;
+            #[cfg(target_arch = "x86_64")]
+            if let Kernel::Avx512(t) = kernel {
+                // SAFETY: the token exists, so the CPU has AVX-512F.
+                done = unsafe { x86::interleave_clamped_avx512(t, rgb, &mut buf[..n * 3]) };
+            }
+            for (i, px) in buf[..n * 3].chunks_exact_mut(3).enumerate().skip(done) {
+                px[0] = rgb[0][i].clamp(0.0, 1.0);
+                px[1] = rgb[1][i].clamp(0.0, 1.0);
+                px[2] = rgb[2][i].clamp(0.0, 1.0);
+            }
+            #[cfg(target_arch = "x86_64")]
+            if let Kernel::Avx512(t) = kernel {
+                // SAFETY: as above.
+                unsafe { x86::stream_copy_avx512(t, nt, out, &buf) };
+            } else {
+                x86::stream_copy(nt, out, &buf);
+            }
+            #[cfg(not(target_arch = "x86_64"))]
+            {
+                let _ = nt;
+                out.copy_from_slice(&buf[..out.len()]);
+            }
+        },
+    );
 }
 
 /// The batched compositor with an explicit kernel: renders every look of `weights`, and
 /// hands each candidate's strip (`[R, G, B]` planes, one value per pixel) to `emit`
 /// together with the strip's part of that candidate's output (`3 * pixels` long).
 ///
-/// Panics if `kernel` is not [`Kernel::supported`] or an output is not `pixels * 3` long.
+/// Panics if an output is not `pixels * 3` long.
 pub fn composite_with<O: Send>(
     kernel: Kernel,
     basis: &BasisImages,
@@ -575,19 +604,25 @@ fn composite_srgb8_chunked(
     chunk: usize,
 ) {
     #[cfg(target_arch = "x86_64")]
-    if kernel == Kernel::Avx512
+    if let Kernel::Avx512(_) = kernel
         && let Some(vbmi) = crate::color::Vbmi::new()
     {
         return run(kernel, basis, weights, outputs, chunk, |last| {
             let (ch, acc) = (last.ch, &last.sums[last.ch]);
             if ch < 2 {
-                // SAFETY: Vbmi::new() checked AVX-512 F, BW, VBMI and VBMI2.
+                // SAFETY: the Vbmi exists, so the CPU has AVX-512 F, BW, VBMI and VBMI2.
                 unsafe { x86::codes_avx512(last.call, acc, vbmi, &mut last.codes[ch]) };
             } else {
+                let Last {
+                    call,
+                    codes,
+                    outs,
+                    local,
+                    nt,
+                    ..
+                } = last;
                 // SAFETY: as above.
-                unsafe {
-                    x86::emit_avx512(last.call, acc, vbmi, last.codes, last.outs, last.local)
-                };
+                unsafe { x86::emit_avx512(call, acc, vbmi, nt, codes, outs, local) };
             }
         });
     }
@@ -608,6 +643,21 @@ fn composite_chunked<O: Send>(
     chunk: usize,
     emit: impl Fn([&[f32]; 3], &mut [O]) + Sync,
 ) {
+    emit_chunked(kernel, basis, weights, outputs, chunk, |rgb, out, _| {
+        emit(rgb, out)
+    });
+}
+
+/// [`composite_chunked`] whose `emit` may also stream its output (it is handed the task's
+/// [`NonTemporal`] scope).
+fn emit_chunked<O: Send>(
+    kernel: Kernel,
+    basis: &BasisImages,
+    weights: &[Vec<[f32; 3]>],
+    outputs: &mut [Vec<O>],
+    chunk: usize,
+    emit: impl Fn([&[f32]; 3], &mut [O], &NonTemporal) + Sync,
+) {
     run(kernel, basis, weights, outputs, chunk, |last| {
         let ch = last.ch;
         let acc = &mut last.sums[ch];
@@ -618,7 +668,7 @@ fn composite_chunked<O: Send>(
             let len = last.local.len() / 3;
             for (r, out) in last.outs.iter_mut().enumerate() {
                 let rgb = std::array::from_fn(|ch| &last.sums[ch][r][..len]);
-                emit(rgb, &mut out[last.local.clone()]);
+                emit(rgb, &mut out[last.local.clone()], last.nt);
             }
         }
     });
@@ -639,6 +689,8 @@ struct Last<'a, 'o, O> {
     /// The block's candidates' outputs, of which this strip is `local`.
     outs: &'a mut [&'o mut [O]],
     local: std::ops::Range<usize>,
+    /// The task's scope for non-temporal stores into `outs` (fenced when the task ends).
+    nt: &'a NonTemporal,
 }
 
 /// The batched compositor's loop: every call but a block's last of a channel stores its
@@ -651,7 +703,6 @@ fn run<O: Send>(
     chunk: usize,
     finish: impl Fn(Last<'_, '_, O>) + Sync,
 ) {
-    assert!(kernel.supported(), "{kernel:?} does not run on this CPU");
     let pixels = basis.pixels();
     assert!(outputs.iter().all(|o| o.len() == pixels * 3));
     assert!(weights.iter().all(|w| w.len() >= basis.lights));
@@ -672,22 +723,25 @@ fn run<O: Send>(
         }
     }
     tasks.into_par_iter().enumerate().for_each(|(t, mut outs)| {
-        SCRATCH.with_borrow_mut(|scratch| {
-            scratch.fit(&plan);
-            for start in (t * task_px..pixels.min((t + 1) * task_px)).step_by(STRIP) {
-                let local = start - t * task_px;
-                let len = (pixels - start).min(STRIP);
-                plan.strip(
-                    start / STRIP,
-                    scratch,
-                    &mut outs,
-                    local * 3..(local + len) * 3,
-                    &finish,
-                );
-            }
+        // The task's non-temporal stores are fenced as its scope ends, on its thread, before
+        // rayon's join hands the outputs back.
+        non_temporal(|nt| {
+            SCRATCH.with_borrow_mut(|scratch| {
+                scratch.fit(&plan);
+                for start in (t * task_px..pixels.min((t + 1) * task_px)).step_by(STRIP) {
+                    let local = start - t * task_px;
+                    let len = (pixels - start).min(STRIP);
+                    plan.strip(
+                        start / STRIP,
+                        scratch,
+                        nt,
+                        &mut outs,
+                        local * 3..(local + len) * 3,
+                        &finish,
+                    );
+                }
+            })
         });
-        #[cfg(target_arch = "x86_64")]
-        x86::store_fence();
         // A task is at most a millisecond or so: offering the CPU between tasks lets a
         // thread that just woke (the DMX clock) run now rather than when the scheduler's
         // slice ends, which measurably cuts late frames during generates (~1 us per task).
@@ -769,6 +823,7 @@ impl<'a> Plan<'a> {
         &self,
         strip: usize,
         scratch: &mut Scratch,
+        nt: &NonTemporal,
         outs: &mut [&mut [O]],
         local: std::ops::Range<usize>,
         finish: &impl Fn(Last<'_, '_, O>),
@@ -834,6 +889,7 @@ impl<'a> Plan<'a> {
                         codes: &mut codes[blk],
                         outs: &mut outs[cs],
                         local: local.clone(),
+                        nt,
                     });
                 }
             }
@@ -980,11 +1036,11 @@ mod tests {
 
     #[test]
     fn every_kernel_matches_the_scalar_reference() {
-        for kernel in Kernel::ALL {
-            if !kernel.supported() {
-                eprintln!("note: {kernel:?} does not run on this CPU; its test is skipped");
+        for (name, kernel) in Kernel::all() {
+            let Some(kernel) = kernel else {
+                eprintln!("note: {name} does not run on this CPU; its test is skipped");
                 continue;
-            }
+            };
             check(kernel, Precision::Single);
             check(kernel, Precision::Half);
         }
@@ -997,11 +1053,11 @@ mod tests {
     #[cfg(target_arch = "x86_64")]
     #[test]
     fn srgb8_render_matches_the_planar_encoder() {
-        if crate::color::Vbmi::new().is_none() {
+        let (Some(t), Some(_)) = (Avx512F::detect(), crate::color::Vbmi::new()) else {
             eprintln!("note: this CPU lacks AVX-512 VBMI; the in-kernel encoding is not tested");
             return;
-        }
-        let kernel = Kernel::Avx512;
+        };
+        let kernel = Kernel::Avx512(t);
         let (w, h, lights, planes) = planes();
         let looks = looks(lights);
         let refs: Vec<&Look> = looks.iter().collect();

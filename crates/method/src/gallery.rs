@@ -10,6 +10,8 @@ use rayon::prelude::*;
 use crate::sampler::Plan;
 use visobjd_compositor::basis::BasisImages;
 use visobjd_compositor::color::linear_to_lab_planar;
+#[cfg(target_arch = "x86_64")]
+use visobjd_compositor::cpu::{Avx2Fma, Avx512F};
 use visobjd_compositor::render::{Kernel, STRIP, composite_with, weights, zeroed_outputs};
 use visobjd_scene::look::Look;
 
@@ -127,25 +129,27 @@ impl Clustering {
 /// The sum runs in 16 fixed lanes, so it vectorises and gives the same value on every CPU.
 pub fn mean_delta_e(a: &[f32], b: &[f32]) -> f32 {
     #[cfg(target_arch = "x86_64")]
-    if is_x86_feature_detected!("avx512f") {
-        // SAFETY: AVX-512F was just detected.
-        return unsafe { mean_delta_e_avx512(a, b) };
-    } else if is_x86_feature_detected!("avx2") {
-        // SAFETY: AVX2 was just detected.
-        return unsafe { mean_delta_e_avx2(a, b) };
+    if let Some(t) = Avx512F::detect() {
+        // SAFETY: the token exists, so the CPU has AVX-512F.
+        return unsafe { mean_delta_e_avx512(t, a, b) };
+    } else if let Some(t) = Avx2Fma::detect() {
+        // SAFETY: the token exists, so the CPU has AVX2.
+        return unsafe { mean_delta_e_avx2(t, a, b) };
     }
     mean_delta_e_lanes(a, b)
 }
 
+/// The token is the caller's proof of the feature.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f")]
-fn mean_delta_e_avx512(a: &[f32], b: &[f32]) -> f32 {
+fn mean_delta_e_avx512(_: Avx512F, a: &[f32], b: &[f32]) -> f32 {
     mean_delta_e_lanes(a, b)
 }
 
+/// The token (AVX2 with FMA, which every AVX2 CPU has) is the caller's proof of AVX2.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-fn mean_delta_e_avx2(a: &[f32], b: &[f32]) -> f32 {
+fn mean_delta_e_avx2(_: Avx2Fma, a: &[f32], b: &[f32]) -> f32 {
     mean_delta_e_lanes(a, b)
 }
 
@@ -426,10 +430,13 @@ mod tests {
             // The same value on every CPU.
             assert_eq!(got.to_bits(), mean_delta_e_lanes(&a, &b).to_bits());
             #[cfg(target_arch = "x86_64")]
-            if is_x86_feature_detected!("avx2") {
-                // SAFETY: AVX2 was just detected.
-                let avx2 = unsafe { mean_delta_e_avx2(&a, &b) };
-                assert_eq!(got.to_bits(), avx2.to_bits());
+            match Avx2Fma::detect() {
+                Some(t) => {
+                    // SAFETY: the token exists, so the CPU has AVX2.
+                    let avx2 = unsafe { mean_delta_e_avx2(t, &a, &b) };
+                    assert_eq!(got.to_bits(), avx2.to_bits());
+                }
+                None => eprintln!("note: this CPU lacks AVX2; its path is not compared"),
             }
             assert_eq!(mean_delta_e(&a, &a), 0.0);
         }
