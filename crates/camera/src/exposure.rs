@@ -39,7 +39,13 @@ pub fn read_exposure(path: &Path) -> Result<Option<Exposure>, Error> {
         path: path.to_path_buf(),
         source,
     })?;
-    let exif = match exif::Reader::new().read_from_container(&mut BufReader::new(file)) {
+    // Keep the fields read before a quirk (a sub-IFD with a stray next-IFD pointer, as
+    // piexif and some cameras write): a readable ExposureTime is all this needs.
+    let read = exif::Reader::new()
+        .continue_on_error(true)
+        .read_from_container(&mut BufReader::new(file))
+        .or_else(|e| e.distill_partial_result(|_| {}));
+    let exif = match read {
         Ok(exif) => exif,
         Err(exif::Error::NotFound(_) | exif::Error::InvalidFormat(_)) => return Ok(None),
         Err(exif::Error::Io(source)) => {

@@ -1,0 +1,319 @@
+#!/usr/bin/env python3
+"""A fake `gphoto2` for tests: an independent peer of visobjd's camera layer.
+
+It answers the options visobjd uses the way gphoto2 2.5 documents them:
+  --auto-detect                      a `Model`/`Port` table: header, dashed line, rows
+  --get-config KEY                   Label:, Readonly:, Type:, Current:, Choice: N VALUE, END
+  --set-config KEY=VALUE             exit 1 with `*** Error (-2: 'Bad parameters') ***`
+                                     for a value not among the choices
+  --capture-image-and-download       one file per image format, named by --filename
+  --filename PATTERN                 %C suffix (JPG, CR2), %f camera name, %n number, %%
+  --force-overwrite                  without it, an existing file prompts on stdin
+Options may be combined; the settings options apply to every action, and the actions
+run in the order given, as in gphoto2.
+
+Environment:
+  FAKE_GPHOTO2_STATE     (required) JSON file with the camera state (created if missing)
+  FAKE_GPHOTO2_LOG       a file to which each call's argv is appended, one line per call
+  FAKE_GPHOTO2_SCENE     a .npy float32 HxWx3 linear radiance array (default: a gradient)
+  FAKE_GPHOTO2_APERTURE_KEY  `f-number` for a body that names it so (values `f/8`)
+  FAKE_GPHOTO2_REFUSE    KEY=VALUE[,KEY=VALUE]: listed among the choices, refused by set
+  FAKE_GPHOTO2_HANG_CAPTURE  N[,M]: the Nth capture (from 1) sleeps FAKE_GPHOTO2_HANG_S
+                         seconds (default 3600) instead of answering
+  FAKE_GPHOTO2_FAIL_CALL N[,M] or `all`: the Nth call (from 1) fails with -53
+  FAKE_GPHOTO2_NO_CAMERA 1: no camera is connected
+
+Each frame is rendered (render_frame) from the scene scaled by the exposure through a
+simple camera response with clipping, and written as a JPEG whose EXIF holds the
+exposure the shutter really gave: the true 1/3-stop time (1/64 s for `1/60`), not the
+rounded label, as a rational ExposureTime; ISOSpeedRatings; FNumber.
+"""
+
+import json
+import os
+import sys
+import time
+from fractions import Fraction
+
+SHUTTERS = ["bulb", "30", "25", "20", "15", "13", "10", "8", "6", "5", "4", "3.2", "2.5",
+            "2", "1.6", "1.3", "1", "0.8", "0.6", "0.5", "0.4", "0.3", "1/4", "1/5", "1/6",
+            "1/8", "1/10", "1/13", "1/15", "1/20", "1/25", "1/30", "1/40", "1/50", "1/60",
+            "1/80", "1/100", "1/125", "1/160", "1/200", "1/250", "1/320", "1/400", "1/500",
+            "1/640", "1/800", "1/1000", "1/1250", "1/1600", "1/2000", "1/2500", "1/3200",
+            "1/4000"]
+ISOS = ["Auto", "100", "200", "400", "800", "1600", "3200", "6400"]
+APERTURES = ["4", "5.6", "8", "11", "16"]
+FORMATS = ["Large Fine JPEG", "RAW", "RAW + Large Fine JPEG"]
+
+
+def radio(label, current, choices):
+    return {"label": label, "readonly": 0, "type": "RADIO", "current": current,
+            "choices": choices}
+
+
+def default_state():
+    aperture_key = os.environ.get("FAKE_GPHOTO2_APERTURE_KEY", "aperture")
+    if aperture_key == "f-number":
+        aperture = radio("F-Number", "f/8", ["f/" + a for a in APERTURES])
+    else:
+        aperture = radio("Aperture", "8", list(APERTURES))
+    return {
+        "model": "Canon EOS 6D",
+        "port": "usb:001,007",
+        "calls": 0,
+        "captures": 0,
+        "image_number": 0,
+        "config": {
+            "shutterspeed": radio("Shutter Speed", "1/60", list(SHUTTERS)),
+            "iso": radio("ISO Speed", "100", list(ISOS)),
+            aperture_key: aperture,
+            "imageformat": radio("Image Format", "Large Fine JPEG", list(FORMATS)),
+        },
+    }
+
+
+def load_state(path):
+    try:
+        with open(path, encoding="utf-8") as f:
+            return json.load(f)
+    except FileNotFoundError:
+        return default_state()
+
+
+def save_state(path, state):
+    tmp = path + ".tmp"
+    with open(tmp, "w", encoding="utf-8") as f:
+        json.dump(state, f, indent=1)
+    os.replace(tmp, path)
+
+
+def numbers(name):
+    """The call numbers an N[,M] variable names; `all` is every call."""
+    text = os.environ.get(name, "").strip()
+    if text == "all":
+        return "all"
+    return {int(n) for n in text.split(",") if n.strip()}
+
+
+def hit(spec, n):
+    return spec == "all" or n in spec
+
+
+def error(code, text, context=None):
+    """Prints gphoto2's error lines (a context message first, if any) and exits 1."""
+    if context:
+        sys.stderr.write("\n*** Error ***              \n%s\n" % context)
+    sys.stderr.write("*** Error (%d: '%s') ***       \n\n" % (code, text))
+    sys.stdout.write("For debugging messages, please use the --debug option.\n")
+    sys.exit(1)
+
+
+def seconds(label):
+    if "/" in label:
+        n, d = label.split("/", 1)
+        return float(n) / float(d)
+    return float(label)
+
+
+def true_time(label):
+    """What the shutter gives for a label: the exact 1/3-stop time 2^(k/3) s."""
+    import math
+    k = round(3 * math.log2(seconds(label)))
+    return Fraction(2.0 ** (k / 3.0)).limit_denominator(100000)
+
+
+def default_scene():
+    import numpy as np
+    h, w = 32, 48
+    x = np.linspace(0.0, 1.0, w, dtype=np.float32)
+    y = np.linspace(0.0, 1.0, h, dtype=np.float32)
+    scene = np.zeros((h, w, 3), dtype=np.float32)
+    ramp = np.outer(np.ones(h, dtype=np.float32), 10.0 ** (x * 4 - 2))  # 0.01 .. 100
+    scene[..., 0] = ramp
+    scene[..., 1] = ramp * (0.5 + 0.5 * y[:, None])
+    scene[..., 2] = ramp * 0.25
+    return scene
+
+
+def render_frame(radiance, exposure_s, iso, f_number):
+    """A frame as the camera would record it: linear radiance times the exposure
+    (time, ISO, aperture), through a gamma response, clipped to 8 bits. Kept apart from
+    the option handling so a later step can feed it radiance rendered from DMX."""
+    import numpy as np
+    # 1.0 radiance at 1/64 s, ISO 100, f/8 lands at 18% grey.
+    gain = 0.18 * 64.0 * 64.0
+    signal = radiance * (exposure_s * (iso / 100.0) / (f_number * f_number) * gain)
+    encoded = np.clip(signal, 0.0, 1.0) ** (1.0 / 2.2)
+    return np.round(encoded * 255.0).astype(np.uint8)
+
+
+def exif_bytes(state, exposure, iso, f_number):
+    import piexif
+    fnum = Fraction(f_number).limit_denominator(100)
+    return piexif.dump({
+        "0th": {
+            piexif.ImageIFD.Make: b"Canon",
+            piexif.ImageIFD.Model: state["model"].encode(),
+        },
+        "Exif": {
+            piexif.ExifIFD.ExposureTime: (exposure.numerator, exposure.denominator),
+            piexif.ExifIFD.ISOSpeedRatings: iso,
+            piexif.ExifIFD.FNumber: (fnum.numerator, fnum.denominator),
+            piexif.ExifIFD.DateTimeOriginal: time.strftime("%Y:%m:%d %H:%M:%S").encode(),
+        },
+    })
+
+
+def expand(pattern, suffix, stem, number):
+    out, i = [], 0
+    while i < len(pattern):
+        c = pattern[i]
+        if c == "%" and i + 1 < len(pattern):
+            code = pattern[i + 1]
+            out.append({"C": suffix, "f": stem, "n": "%d" % number, "%": "%"}.get(code, "%" + code))
+            i += 2
+        else:
+            out.append(c)
+            i += 1
+    return "".join(out)
+
+
+def capture(state, filename, force):
+    from PIL import Image
+    import numpy as np
+
+    config = state["config"]
+    label = config["shutterspeed"]["current"]
+    if label == "bulb":
+        error(-1, "Unspecified error", "Bulb needs --bulb or --set-config eosremoterelease.")
+    exposure = true_time(label)
+    iso_text = config["iso"]["current"]
+    iso = 100 if iso_text == "Auto" else int(iso_text)
+    aperture = config.get("aperture") or config.get("f-number")
+    f_number = float(aperture["current"].replace("f/", ""))
+
+    scene_path = os.environ.get("FAKE_GPHOTO2_SCENE")
+    radiance = np.load(scene_path).astype(np.float32) if scene_path else default_scene()
+    pixels = render_frame(radiance, float(exposure), iso, f_number)
+    image = Image.fromarray(pixels, "RGB")
+    exif = exif_bytes(state, exposure, iso, f_number)
+
+    fmt = config["imageformat"]["current"]
+    suffixes = (["CR2"] if "RAW" in fmt else []) + (["JPG"] if "JPEG" in fmt else [])
+    state["image_number"] += 1
+    stem = "IMG_%04d" % state["image_number"]
+    for suffix in suffixes:
+        on_camera = "/store_00020001/DCIM/100CANON/%s.%s" % (stem, suffix)
+        print("New file is in location %s on the camera" % on_camera)
+        name = expand(filename, suffix, stem, state["image_number"]) if filename else stem + "." + suffix
+        if os.path.exists(name) and not force:
+            sys.stdout.write("File %s exists. Overwrite? [y|n] " % name)
+            sys.stdout.flush()
+            if not sys.stdin.readline().strip().lower().startswith("y"):
+                continue
+        print("Saving file as %s" % name)
+        if suffix == "JPG":
+            image.save(name, "JPEG", quality=95, exif=exif)
+        else:
+            # The RAW stand-in: a TIFF (as CR2 and NEF are) with the same EXIF.
+            image.save(name, "TIFF", exif=exif)
+        print("Deleting file %s on the camera" % on_camera)
+
+
+def main(argv):
+    state_path = os.environ.get("FAKE_GPHOTO2_STATE")
+    if not state_path:
+        sys.stderr.write("fake gphoto2: set FAKE_GPHOTO2_STATE to a JSON state file\n")
+        return 2
+    log = os.environ.get("FAKE_GPHOTO2_LOG")
+    if log:
+        with open(log, "a", encoding="utf-8") as f:
+            f.write(json.dumps(argv) + "\n")
+
+    state = load_state(state_path)
+    state["calls"] += 1
+    save_state(state_path, state)
+
+    # First pass: settings that apply to every action. Second: actions, in order.
+    actions, filename, force, i = [], None, False, 0
+    while i < len(argv):
+        arg = argv[i]
+        key, eq, inline = arg.partition("=")
+        takes = key in ("--get-config", "--set-config", "--filename")
+        if takes:
+            if eq:
+                value = inline
+            elif i + 1 < len(argv):
+                i += 1
+                value = argv[i]
+            else:
+                sys.stderr.write("%s: missing argument\n" % key)
+                return 1
+        if key == "--filename":
+            filename = value
+        elif key == "--force-overwrite":
+            force = True
+        elif key in ("--get-config", "--set-config"):
+            actions.append((key, value))
+        elif key in ("--auto-detect", "--capture-image-and-download"):
+            actions.append((key, None))
+        else:
+            sys.stderr.write("gphoto2: unknown option %s\n" % arg)
+            return 1
+        i += 1
+
+    if hit(numbers("FAKE_GPHOTO2_FAIL_CALL"), state["calls"]):
+        error(-53, "Could not claim the USB device",
+              "Could not claim interface 0 (Device or resource busy). Make sure no other "
+              "program (gvfs-gphoto2-volume-monitor) or kernel module (such as sdc2xx, "
+              "stv680, spca50x) is using the device and you have read/write access to the "
+              "device.")
+    no_camera = os.environ.get("FAKE_GPHOTO2_NO_CAMERA") == "1"
+
+    for action, value in actions:
+        if action == "--auto-detect":
+            print("%-30s %s" % ("Model", "Port"))
+            print("-" * 58)
+            if not no_camera:
+                print("%-30s %s" % (state["model"], state["port"]))
+            continue
+        if no_camera:
+            sys.stderr.write("*** Error: No camera found. ***\n\n")
+            return 1
+        config = state["config"]
+        if action == "--get-config":
+            entry = config.get(value)
+            if entry is None:
+                error(-2, "Bad parameters", "%s not found in configuration tree." % value)
+            print("Label: %s" % entry["label"])
+            print("Readonly: %d" % entry["readonly"])
+            print("Type: %s" % entry["type"])
+            print("Current: %s" % entry["current"])
+            for n, choice in enumerate(entry["choices"]):
+                print("Choice: %d %s" % (n, choice))
+            print("END")
+        elif action == "--set-config":
+            key, _, new = value.partition("=")
+            entry = config.get(key)
+            if entry is None:
+                error(-2, "Bad parameters", "%s not found in configuration tree." % key)
+            refused = {r.strip() for r in os.environ.get("FAKE_GPHOTO2_REFUSE", "").split(",") if r.strip()}
+            if new not in entry["choices"]:
+                error(-2, "Bad parameters", "Choice %s not found within list of choices." % new)
+            if "%s=%s" % (key, new) in refused:
+                error(-2, "Bad parameters", "Failed to set new configuration value %s for configuration entry %s." % (new, key))
+            entry["current"] = new
+            save_state(state_path, state)
+        elif action == "--capture-image-and-download":
+            state["captures"] += 1
+            save_state(state_path, state)
+            if hit(numbers("FAKE_GPHOTO2_HANG_CAPTURE"), state["captures"]):
+                sys.stdout.flush()
+                time.sleep(float(os.environ.get("FAKE_GPHOTO2_HANG_S", "3600")))
+            capture(state, filename, force)
+            save_state(state_path, state)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
