@@ -123,10 +123,10 @@ impl Camera for CommandCamera {
             let message = done
                 .stderr
                 .lines()
-                .chain(done.stdout.lines())
+                .rev()
+                .chain(done.stdout.lines().rev())
                 .map(str::trim)
-                .filter(|l| !l.is_empty())
-                .last()
+                .find(|l| !l.is_empty())
                 .map(str::to_string)
                 .unwrap_or_else(|| format!("it exited with {}", done.status));
             return Err(Error::Tool {

@@ -321,21 +321,19 @@ pub fn tool_message(stderr: &str, stdout: &str) -> String {
         }
         if line == "*** Error ***" {
             after_header = true;
-        } else if line.starts_with("*** Error") {
-            parts.push(line.to_string());
-            after_header = false;
-        } else if after_header {
+        } else if line.starts_with("*** Error") || after_header {
             parts.push(line.to_string());
             after_header = false;
         }
     }
     if parts.is_empty() {
+        // The last line of stderr, else of stdout.
         let last = stderr
             .lines()
-            .chain(stdout.lines())
+            .rev()
+            .chain(stdout.lines().rev())
             .map(str::trim)
-            .filter(|l| !l.is_empty())
-            .last();
+            .find(|l| !l.is_empty());
         return match last {
             Some(line) => line.to_string(),
             None => "it exited with an error and printed nothing".to_string(),
