@@ -153,9 +153,10 @@ pub trait Camera {
     fn set_config(&mut self, key: &str, value: &str) -> Result<(), Error>;
 
     /// Shoots one frame at `shutter` into `out` and returns the files written with the
-    /// exposure read back from them. The gphoto2 camera writes `out` with the extension
-    /// of each format it is set to (`frame.jpg`, `frame.cr2`); the command camera writes
-    /// `out` as given.
+    /// exposure read back from them. The gphoto2 camera writes `out` with its extension
+    /// replaced by each file's suffix as the camera names it (`frame.JPG`, and
+    /// `frame.CR2` for RAW + JPEG); the command camera writes `out` as given. The shutter
+    /// must be one of the camera's choices (gphoto2) and is set in the same process.
     fn capture(&mut self, shutter: &Shutter, out: &Path) -> Result<Frame, Error>;
 }
 
