@@ -47,7 +47,12 @@ pub struct AmbientDrift {
 pub fn ambient_drift(start: &Radiance, end: &Radiance) -> Result<AmbientDrift, HdrError> {
     same_size(start, end)?;
     let (mut diff, mut sum, mut s0, mut s1) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
-    for (a, b) in start.pixels.iter().flatten().zip(end.pixels.iter().flatten()) {
+    for (a, b) in start
+        .pixels
+        .iter()
+        .flatten()
+        .zip(end.pixels.iter().flatten())
+    {
         let (a, b) = (f64::from(*a), f64::from(*b));
         diff += (b - a).abs();
         sum += (a + b) / 2.0;
@@ -85,18 +90,19 @@ pub const LIT_SIGMAS: f64 = 5.0;
 pub const MIN_LIT_FRACTION: f64 = 0.0005;
 /// See [`MIN_LIT_FRACTION`].
 pub const MIN_LIT_PIXELS: usize = 10;
-/// Brightness classes for the noise estimate (noise grows with signal).
-const CLASSES: usize = 16;
+/// Half-width in pixels of the window the noise is measured over (15x15).
+const WINDOW: usize = 7;
 
 /// Tests whether `light` (merged with the light at full, ambient included) shows light
 /// over `ambient` (merged with the light off, same settings).
 ///
-/// The noise of `light - ambient` is measured from the data: horizontal neighbour
-/// differences of it, whose spread is sqrt(2) x the per-pixel noise while a smooth light
-/// field cancels, robustly (1.4826 x median absolute value) and separately for 16
-/// brightness classes, since shot noise grows with brightness. A pixel is lit when any
-/// channel exceeds [`LIT_SIGMAS`] of its class's noise; the light shows light when the lit
-/// pixels reach [`MIN_LIT_FRACTION`] of the image.
+/// The noise of `light - ambient` is measured from the data, locally (noise depends on
+/// brightness and on which frames of the bracket saw a pixel): the mean absolute
+/// horizontal neighbour difference in a 15x15 window, where a smooth light field cancels
+/// and independent noise of deviation sigma gives 2 sigma / sqrt(pi); an edge in the window
+/// only raises the estimate (fewer lit pixels, never more). A pixel is lit when any channel
+/// exceeds [`LIT_SIGMAS`] of its local noise; the light shows light when the lit pixels
+/// reach [`MIN_LIT_FRACTION`] of the image.
 pub fn light_test(light: &Radiance, ambient: &Radiance) -> Result<LightTest, HdrError> {
     same_size(light, ambient)?;
     let (w, n) = (light.width, light.pixels.len());
@@ -107,49 +113,56 @@ pub fn light_test(light: &Radiance, ambient: &Radiance) -> Result<LightTest, Hdr
         .zip(&ambient.pixels)
         .map(|(l, a)| [0, 1, 2].map(|c| l[c] - a[c]))
         .collect();
-    let bright: Vec<[f32; 3]> = light
+    let h = light.height;
+    let mean = light
         .pixels
         .iter()
-        .zip(&ambient.pixels)
-        .map(|(l, a)| [0, 1, 2].map(|c| (l[c] + a[c]) / 2.0))
-        .collect();
-    // Class edges: brightness quantiles.
-    let mut all: Vec<f32> = bright.iter().flatten().copied().collect();
-    all.sort_by(f32::total_cmp);
-    let edges: Vec<f32> = (1..CLASSES).map(|k| all[k * all.len() / CLASSES]).collect();
-    let class = |b: f32| edges.partition_point(|&e| e <= b);
-    let mean = all.iter().map(|&v| f64::from(v)).sum::<f64>() / all.len().max(1) as f64;
-    // Noise per class from neighbour differences.
-    let mut d: Vec<Vec<f32>> = vec![Vec::new(); CLASSES];
-    for (i, p) in diff.iter().enumerate() {
-        if (i + 1) % w == 0 || i + 1 >= n {
-            continue;
-        }
-        for c in 0..3 {
-            d[class(bright[i][c])].push((p[c] - diff[i + 1][c]).abs());
+        .chain(&ambient.pixels)
+        .flatten()
+        .map(|&v| f64::from(v))
+        .sum::<f64>()
+        / (2 * 3 * n).max(1) as f64;
+    // |neighbour difference| per sample, summed in an integral image per channel.
+    let mut integral = vec![[0.0f64; 3]; (w + 1) * (h + 1)];
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            let j = if x + 1 < w {
+                i + 1
+            } else {
+                i.saturating_sub(1)
+            };
+            for c in 0..3 {
+                let d = f64::from((diff[i][c] - diff[j][c]).abs());
+                integral[(y + 1) * (w + 1) + x + 1][c] =
+                    d + integral[y * (w + 1) + x + 1][c] + integral[(y + 1) * (w + 1) + x][c]
+                        - integral[y * (w + 1) + x][c];
+            }
         }
     }
-    // A floor so an all-black class (exact zeros) does not call every speck lit.
+    // A floor so an all-black area (exact zeros) does not call every speck lit.
     let floor = (1e-4 * mean).max(f64::MIN_POSITIVE);
-    let sigma: Vec<f64> = d
-        .iter_mut()
-        .map(|v| {
-            if v.is_empty() {
-                return floor;
-            }
-            let mid = v.len() / 2;
-            let m = f64::from(*v.select_nth_unstable_by(mid, f32::total_cmp).1);
-            (1.4826 * m / std::f64::consts::SQRT_2).max(floor)
-        })
-        .collect();
     let (mut lit, mut peak) = (0usize, 0.0f64);
-    for (p, b) in diff.iter().zip(&bright) {
-        let snr = (0..3)
-            .map(|c| f64::from(p[c]) / sigma[class(b[c])])
-            .fold(f64::MIN, f64::max);
-        peak = peak.max(snr);
-        if snr > LIT_SIGMAS {
-            lit += 1;
+    for y in 0..h {
+        let (y0, y1) = (y.saturating_sub(WINDOW), (y + WINDOW + 1).min(h));
+        for x in 0..w {
+            let (x0, x1) = (x.saturating_sub(WINDOW), (x + WINDOW + 1).min(w));
+            let count = ((y1 - y0) * (x1 - x0)) as f64;
+            let p = diff[y * w + x];
+            let mut snr = f64::MIN;
+            for c in 0..3 {
+                let s = integral[y1 * (w + 1) + x1][c]
+                    - integral[y0 * (w + 1) + x1][c]
+                    - integral[y1 * (w + 1) + x0][c]
+                    + integral[y0 * (w + 1) + x0][c];
+                // E|d| = 2 sigma / sqrt(pi) for d ~ N(0, 2 sigma^2).
+                let sigma = (s / count * std::f64::consts::PI.sqrt() / 2.0).max(floor);
+                snr = snr.max(f64::from(p[c]) / sigma);
+            }
+            peak = peak.max(snr);
+            if snr > LIT_SIGMAS {
+                lit += 1;
+            }
         }
     }
     Ok(LightTest {

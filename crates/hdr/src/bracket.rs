@@ -117,7 +117,9 @@ pub fn propose_bracket(
                 if p.iter().all(|&z| z <= settings.jpeg_black) {
                     continue;
                 }
-                let x = (0..3).map(|c| f64::from(r.linearise(c, p[c]))).fold(0.0, f64::max);
+                let x = (0..3)
+                    .map(|c| f64::from(r.linearise(c, p[c])))
+                    .fold(0.0, f64::max);
                 values.push(x);
             }
         }

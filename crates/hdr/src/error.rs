@@ -67,9 +67,7 @@ pub enum HdrError {
         white: u16,
     },
     /// JPEG and raw frames mixed in one bracket.
-    #[error(
-        "frame {frame} is {got} but frame 0 is {want}; shoot the whole bracket in one format"
-    )]
+    #[error("frame {frame} is {got} but frame 0 is {want}; shoot the whole bracket in one format")]
     MixedKinds {
         /// Index of the frame.
         frame: usize,

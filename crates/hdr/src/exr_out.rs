@@ -5,7 +5,6 @@
 use std::io::Cursor;
 use std::path::Path;
 
-
 use crate::{HdrError, Radiance};
 
 /// Encodes `img` as a half-float RGB EXR in memory. Samples are clamped to the half range

@@ -319,7 +319,7 @@ fn merge_row(lins: &[(Lin<'_>, f32)], y: usize, w: usize, out: &mut [[f32; 3]]) 
                     o[c] = if den[c] > 0.0 {
                         num[c] / den[c]
                     } else {
-                        (lv[c] / lt).max(0.0)
+                        lv[c] / lt
                     };
                 }
             }
@@ -380,7 +380,12 @@ fn fit_exposures(
 
 /// Linear value (fraction of full scale) of sample `i` of a frame, and whether its pixel
 /// is clipped.
-fn sample(f: &Frame<'_>, response: Option<&Response>, s: &MergeSettings, p: usize) -> Option<[f32; 3]> {
+fn sample(
+    f: &Frame<'_>,
+    response: Option<&Response>,
+    s: &MergeSettings,
+    p: usize,
+) -> Option<[f32; 3]> {
     match f.pixels {
         Pixels::Raw {
             values,

@@ -42,7 +42,12 @@ pub(crate) fn owner(j: usize, n: usize, m: usize) -> usize {
 }
 
 /// Adds `weight x` the horizontal resample of `row` into `acc`.
-pub(crate) fn add_row(row: &[[f32; 3]], xs: &[Vec<(usize, f32)>], weight: f32, acc: &mut [[f32; 3]]) {
+pub(crate) fn add_row(
+    row: &[[f32; 3]],
+    xs: &[Vec<(usize, f32)>],
+    weight: f32,
+    acc: &mut [[f32; 3]],
+) {
     for (out, taps) in acc.iter_mut().zip(xs) {
         let mut s = [0.0f32; 3];
         for &(j, wx) in taps {

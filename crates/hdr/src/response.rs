@@ -25,6 +25,8 @@ const BINS: usize = 64;
 /// At most this many pixels per bin, so bright and dark pixels are as well represented as
 /// the mid-tones that dominate a stage picture.
 const PER_BIN: usize = 80;
+/// Iterations at most; the curve usually settles well before.
+const ITERATIONS: usize = 100;
 /// Fewest usable sample pixels (seen mid-range in at least two frames).
 const MIN_SAMPLES: usize = 200;
 
@@ -72,7 +74,12 @@ impl Response {
             let p = rng.random_range(0..n_px);
             let s: usize = codes
                 .iter()
-                .map(|c| c[p * 3..p * 3 + 3].iter().map(|&v| usize::from(v)).sum::<usize>())
+                .map(|c| {
+                    c[p * 3..p * 3 + 3]
+                        .iter()
+                        .map(|&v| usize::from(v))
+                        .sum::<usize>()
+                })
                 .sum();
             let b = s * BINS / top;
             if bins[b].len() < PER_BIN {
@@ -119,7 +126,13 @@ fn robertson(z: &[u8], nf: usize, t: &[f64]) -> Result<Vec<f32>, HdrError> {
     let w: Vec<f64> = (0..=255u8).map(weight).collect();
     // Usable samples: seen with non-zero weight in at least two frames.
     let usable: Vec<usize> = (0..n)
-        .filter(|&i| z[i * nf..(i + 1) * nf].iter().filter(|&&v| w[usize::from(v)] > 0.0).count() >= 2)
+        .filter(|&i| {
+            z[i * nf..(i + 1) * nf]
+                .iter()
+                .filter(|&&v| w[usize::from(v)] > 0.0)
+                .count()
+                >= 2
+        })
         .collect();
     if usable.len() < MIN_SAMPLES {
         return Err(HdrError::TooFewSamples {
@@ -129,7 +142,7 @@ fn robertson(z: &[u8], nf: usize, t: &[f64]) -> Result<Vec<f32>, HdrError> {
     }
     let mut g: Vec<f64> = (0..256).map(|v| (v as f64).max(0.5) / 128.0).collect();
     let mut e = vec![0.0f64; n];
-    for _ in 0..100 {
+    for _ in 0..ITERATIONS {
         for &i in &usable {
             let (mut num, mut den) = (0.0, 0.0);
             for j in 0..nf {
