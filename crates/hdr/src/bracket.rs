@@ -132,8 +132,7 @@ pub fn propose_bracket(
         choices
             .iter()
             .copied()
-            .filter(|&t| brightest * t * k <= settings.headroom)
-            .last()
+            .rfind(|&t| brightest * t * k <= settings.headroom)
             .unwrap_or(choices[0])
     };
     // Longest: the shortest choice that lifts the useful percentile to the useful level.
@@ -166,8 +165,7 @@ pub fn propose_bracket(
         let next = choices
             .iter()
             .copied()
-            .filter(|&c| c > t && c <= t * factor * (1.0 + 1e-9))
-            .last()
+            .rfind(|&c| c > t && c <= t * factor * (1.0 + 1e-9))
             .or_else(|| choices.iter().copied().find(|&c| c > t));
         match next {
             Some(c) => {

@@ -108,11 +108,11 @@ pub fn jpeg_frame(map: &[[f32; 3]], w: usize, t: f64, seed: u64) -> Vec<u8> {
         let mut rng = Rng::seed_from_u64(seed.wrapping_mul(999_983).wrapping_add(y as u64));
         for (x, s) in row.chunks_exact_mut(3).enumerate() {
             let p = map[y * w + x];
-            for c in 0..3 {
+            for (c, out) in s.iter_mut().enumerate() {
                 let e = f64::from(p[c]) * t;
                 let n: f64 = StandardNormal.sample(&mut rng);
                 let v = (e + (e * 2e-5).sqrt() * n).clamp(0.0, 1.0);
-                s[c] = lut[(v * N as f64).round() as usize][c];
+                *out = lut[(v * N as f64).round() as usize][c];
             }
         }
     });
