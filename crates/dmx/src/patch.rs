@@ -7,6 +7,7 @@
 use visobjd_scene::Scene;
 use visobjd_scene::look::{Level, Look};
 use visobjd_scene::profile::Slot;
+use visobjd_scene::srgb::linear_to_srgb;
 
 /// Slots in a DMX universe.
 pub const SLOTS: usize = 512;
@@ -281,6 +282,101 @@ impl Patch {
     }
 }
 
+impl Patch {
+    /// What the DMX in `bytes` (one 512-slot buffer per universe, in
+    /// [`Patch::universes`] order) asks of each light: the linear RGB multiplier of its
+    /// basis image, the inverse of [`Patch::unmastered`] then [`Patch::quantise`] at
+    /// master 1. A simulated camera renders what these would light; a console's output
+    /// becomes a look through [`Patch::decode`].
+    pub fn multipliers(&self, bytes: &[[u8; SLOTS]]) -> Vec<[f32; 3]> {
+        self.lights
+            .iter()
+            .map(|light| match read(light, bytes) {
+                (Some(intensity), full) => full.map(|v| v * intensity),
+                (None, full) => full,
+            })
+            .collect()
+    }
+
+    /// The look the DMX in `bytes` shows: a light with a dimmer takes its intensity from
+    /// it and its colour from the emitters at full; one without takes its brightest
+    /// emitter as its intensity and the rest as its colour, the convention looks follow
+    /// (a colour's largest component is 1). Within one DMX step of the look that was sent.
+    pub fn decode(&self, bytes: &[[u8; SLOTS]]) -> Look {
+        let levels = self
+            .lights
+            .iter()
+            .map(|light| {
+                let (dimmer, full) = read(light, bytes);
+                let intensity = dimmer.unwrap_or_else(|| full.iter().copied().fold(0.0, f32::max));
+                let scale = if dimmer.is_none() && intensity > 0.0 {
+                    intensity
+                } else {
+                    1.0
+                };
+                let color = if dimmer.is_none() && intensity == 0.0 {
+                    [1.0; 3]
+                } else {
+                    full.map(|v| linear_to_srgb(v / scale))
+                };
+                Level { intensity, color }
+            })
+            .collect();
+        Look { levels }
+    }
+}
+
+/// One light's DMX read back: its dimmer level if it has one, and its emitters summed to
+/// one linear colour (white as equal parts, amber and lime as [`AMBER`] and [`LIME`], CMY
+/// flags as `1 - level`, white where the light has no colour slots). A missing universe
+/// reads as zeros.
+fn read(light: &Placed, bytes: &[[u8; SLOTS]]) -> (Option<f32>, [f32; 3]) {
+    let dmx = bytes.get(light.universe);
+    let byte = |i: usize| dmx.and_then(|d| d.get(i)).copied().map_or(0.0, f32::from);
+    let (mut dimmer, mut emitters, mut flags) = (None, None::<[f32; 3]>, None::<[f32; 3]>);
+    let mut at = light.offset;
+    for &slot in &light.slots {
+        let v = if slot == Slot::Intensity16 {
+            (byte(at) * 256.0 + byte(at + 1)) / 65535.0
+        } else {
+            byte(at) / 255.0
+        };
+        let emitter = match slot {
+            Slot::Red => Some([1.0, 0.0, 0.0]),
+            Slot::Green => Some([0.0, 1.0, 0.0]),
+            Slot::Blue => Some([0.0, 0.0, 1.0]),
+            Slot::White => Some([1.0; 3]),
+            Slot::Amber => Some(AMBER),
+            Slot::Lime => Some(LIME),
+            _ => None,
+        };
+        if let Some(e) = emitter {
+            let sum = emitters.get_or_insert([0.0; 3]);
+            for k in 0..3 {
+                sum[k] += v * e[k];
+            }
+        }
+        let flag = match slot {
+            Slot::Cyan => Some(0),
+            Slot::Magenta => Some(1),
+            Slot::Yellow => Some(2),
+            _ => None,
+        };
+        if let Some(k) = flag {
+            flags.get_or_insert([1.0; 3])[k] = 1.0 - v;
+        }
+        if matches!(slot, Slot::Intensity | Slot::Intensity16) {
+            dimmer = Some(v);
+        }
+        at += slot.width();
+    }
+    let full = emitters
+        .map(|c| c.map(|v| v.min(1.0)))
+        .or(flags)
+        .unwrap_or([1.0; 3]);
+    (dimmer.filter(|_| light.has_intensity), full)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -439,5 +535,81 @@ mod tests {
         let patch = Patch::new(&scene);
         let b = patch.quantise(&patch.blackout());
         assert!(b.iter().all(|u| u.iter().all(|&v| v == 0)));
+    }
+
+    #[test]
+    fn every_profile_decodes_to_the_look_it_was_sent_within_a_step() {
+        let scene = scene();
+        let patch = Patch::new(&scene);
+        // A small seeded generator, so a failure can be replayed.
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        for round in 0..200 {
+            let levels = (0..scene.lights.len())
+                .map(|_| {
+                    // Looks keep a colour's largest component at 1.
+                    let mut color = [next(), next(), next()];
+                    color[round % 3] = 1.0;
+                    Level {
+                        intensity: next(),
+                        color,
+                    }
+                })
+                .collect();
+            let sent = Look { levels };
+            let bytes = patch.quantise(&patch.unmastered(&sent));
+            let got = patch.decode(&bytes);
+            let multipliers = patch.multipliers(&bytes);
+            for (i, ((s, g), m)) in sent
+                .levels
+                .iter()
+                .zip(&got.levels)
+                .zip(&multipliers)
+                .enumerate()
+            {
+                let profile = scene.profile(i);
+                let step = 1.0 / 255.0 + 1e-4;
+                if profile.has_colour() {
+                    // The multiplier each emitter carries, to a DMX step per emitter.
+                    let want = s.multiplier();
+                    for k in 0..3 {
+                        assert!(
+                            (m[k] - want[k]).abs() <= 3.0 * step,
+                            "light {i} ({}) round {round}: sent {s:?} -> {m:?}, want {want:?}",
+                            profile.name
+                        );
+                    }
+                    let back = g.multiplier();
+                    for k in 0..3 {
+                        assert!(
+                            (back[k] - m[k]).abs() < 1e-4,
+                            "decode agrees with multipliers"
+                        );
+                    }
+                } else if profile.has_intensity() {
+                    assert!(
+                        (g.intensity - s.intensity).abs() <= step,
+                        "light {i} ({}): {} -> {}",
+                        profile.name,
+                        s.intensity,
+                        g.intensity
+                    );
+                    assert_eq!(*m, [g.intensity; 3]);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_missing_universe_is_dark() {
+        let scene = scene();
+        let patch = Patch::new(&scene);
+        assert!(patch.multipliers(&[]).iter().all(|v| *v == [0.0; 3]));
+        assert!(patch.decode(&[]).levels.iter().all(|l| l.intensity == 0.0));
     }
 }
