@@ -31,6 +31,8 @@ pub struct Config {
     pub eos: EosConfig,
     /// The web gallery (off by default).
     pub http: HttpConfig,
+    /// `visobjd capture`'s settings.
+    pub capture: CaptureConfig,
 }
 
 #[derive(Deserialize)]
@@ -44,6 +46,7 @@ struct ConfigFile {
     generate: GenerateConfig,
     eos: EosConfig,
     http: HttpConfig,
+    capture: CaptureConfig,
 }
 
 impl Default for ConfigFile {
@@ -57,6 +60,7 @@ impl Default for ConfigFile {
             generate: GenerateConfig::default(),
             eos: EosConfig::default(),
             http: HttpConfig::default(),
+            capture: CaptureConfig::default(),
         }
     }
 }
@@ -93,6 +97,29 @@ pub struct HttpConfig {
     /// Listen address such as `127.0.0.1:8080`; empty (the default) turns it off. Its
     /// clients are checked against `osc.allow` like OSC senders.
     pub listen: String,
+}
+
+/// The `[capture]` section (docs/capture.md).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CaptureConfig {
+    /// The sACN priority capture sends at: above a console's 100, so the console can stay
+    /// connected and takes the rig back when capture terminates its streams.
+    pub priority: u8,
+    /// Each camera call is killed after this many seconds and tried once more.
+    pub camera_timeout_s: f64,
+    /// How long a light is given to reach its level before the first frame.
+    pub settle_s: f64,
+}
+
+impl Default for CaptureConfig {
+    fn default() -> Self {
+        CaptureConfig {
+            priority: 200,
+            camera_timeout_s: 60.0,
+            settle_s: 1.0,
+        }
+    }
 }
 
 /// The `[generate]` section.
@@ -237,6 +264,19 @@ impl Config {
                 (0.0..=1.0).contains(&g.sigma_fill),
                 "generate.sigma_fill must be 0..=1",
             ),
+            (
+                file.capture.priority <= 200,
+                "capture.priority must be 0..=200 (E1.31)",
+            ),
+            (
+                file.capture.camera_timeout_s.is_finite()
+                    && (1.0..=3600.0).contains(&file.capture.camera_timeout_s),
+                "capture.camera_timeout_s must be 1..=3600",
+            ),
+            (
+                file.capture.settle_s.is_finite() && (0.0..=60.0).contains(&file.capture.settle_s),
+                "capture.settle_s must be 0..=60",
+            ),
         ];
         if let Some((_, m)) = checks.iter().find(|(ok, _)| !ok) {
             return Err(at((*m).to_string()));
@@ -252,6 +292,7 @@ impl Config {
             generate: file.generate,
             eos: file.eos,
             http: file.http,
+            capture: file.capture,
         })
     }
 

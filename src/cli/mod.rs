@@ -1,6 +1,7 @@
 //! The command line (docs/cli.md): argument parsing and one module per subcommand.
 
 mod bench;
+mod capture;
 mod check;
 mod gallery;
 mod logs;
@@ -44,6 +45,8 @@ enum Command {
     Touchosc(touchosc::Args),
     /// Measures the FLOP bound and the performance targets on this machine.
     Bench(bench::Args),
+    /// Shoots the scene's basis images light by light with a tethered camera.
+    Capture(capture::Args),
 }
 
 /// Starts rayon's global pool, which renders and generates run on, with its threads named
@@ -121,6 +124,7 @@ pub fn main() -> std::process::ExitCode {
         Command::Send(args) => send::run(args),
         Command::Touchosc(args) => touchosc::run(args),
         Command::Bench(args) => bench::run(args),
+        Command::Capture(args) => capture::run(args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

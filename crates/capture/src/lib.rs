@@ -1,0 +1,603 @@
+//! `visobjd capture`: a real rig's basis images, light by light. Each light goes to full
+//! (white through its profile, as the daemon drives it) with every other light at 0; the
+//! camera shoots a metering frame, then a bracket chosen from it; the bracket is merged
+//! to linear radiance ([`visobjd_hdr`]), the ambient light (measured with everything at
+//! 0, at the start and the end) is taken off, and the result is written as the light's
+//! basis image as soon as it is merged. `capture.json` beside `scene.toml` records the
+//! camera, the exposures, the fitted camera response and every light done, so a capture
+//! that stopped resumes at the next light on the same scale.
+//!
+//! The DMX side is the daemon's own output (`visobjd_dmx::Output`), run by the caller at
+//! the capture's sACN priority; the camera is anything implementing
+//! [`visobjd_camera::Camera`] (gphoto2, a command, or [`sim::SimCamera`]).
+
+pub mod decode;
+pub mod sim;
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use rand::{RngExt, SeedableRng};
+use serde::{Deserialize, Serialize};
+use visobjd_camera::{Camera, Shutter};
+use visobjd_dmx::{Output, Patch};
+use visobjd_hdr::{BracketSettings, ExposureFit, MergeSettings, Radiance, Response};
+use visobjd_scene::Scene;
+use visobjd_scene::look::{Level, Look};
+
+/// What the camera is asked to write.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Format {
+    /// 8-bit JPEG: the camera's response is recovered once per session.
+    Jpeg,
+    /// Linear raw (a 16-bit TIFF with black and white levels).
+    Raw,
+}
+
+impl Format {
+    /// `--format` values.
+    pub fn parse(s: &str) -> Result<Format, String> {
+        match s {
+            "jpeg" | "jpg" => Ok(Format::Jpeg),
+            "raw" => Ok(Format::Raw),
+            other => Err(format!("--format {other}: expected raw or jpeg")),
+        }
+    }
+
+    /// The camera's name for it (`imageformat`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Format::Jpeg => "JPEG",
+            Format::Raw => "RAW",
+        }
+    }
+
+    /// The file extension the sim writes.
+    pub fn extension(self) -> &'static str {
+        match self {
+            Format::Jpeg => "jpg",
+            Format::Raw => "tif",
+        }
+    }
+}
+
+/// How to capture.
+#[derive(Debug, Clone)]
+pub struct Options {
+    /// Channels to shoot (`--lights`); `None`: every light.
+    pub lights: Option<Vec<u32>>,
+    /// How long a light is given to reach its level before the first frame (lamps warm up).
+    pub settle: Duration,
+    /// Basis width in pixels (height from the camera's aspect).
+    pub width: usize,
+    /// Raw or JPEG.
+    pub format: Format,
+    /// Seed of the validation look.
+    pub seed: u64,
+}
+
+/// What a person watching the capture is told.
+pub trait Progress {
+    /// The capture starts: this many lights to shoot.
+    fn begin(&mut self, lights: usize);
+    /// What is being done now ("light 7 (front 3): bracket of 5").
+    fn step(&mut self, what: &str);
+    /// One light is done (written, or found to show no light).
+    fn light_done(&mut self);
+    /// Something the user should know, shown without stopping.
+    fn warn(&mut self, what: &str);
+}
+
+/// Why a capture stopped.
+#[derive(Debug, thiserror::Error)]
+pub enum CaptureError {
+    /// The camera failed (after its retry).
+    #[error("camera: {0}")]
+    Camera(#[from] visobjd_camera::Error),
+    /// A merge failed.
+    #[error("merge: {0}")]
+    Merge(#[from] visobjd_hdr::HdrError),
+    /// A shot or a record could not be read or written.
+    #[error("{0}")]
+    Files(String),
+    /// Ctrl-C (or a stop request): what was written stays; run the same command to resume.
+    #[error("stopped; the lights written so far are kept: run the same command to resume")]
+    Stopped,
+}
+
+/// How a capture ended.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Summary {
+    /// Channels written in this run.
+    pub captured: Vec<u32>,
+    /// Channels already written by an earlier run (resumed past).
+    pub resumed: Vec<u32>,
+    /// Channels that show no light, with the sentence saying so.
+    pub no_light: Vec<(u32, String)>,
+    /// Relative change of the ambient light between start and end.
+    pub ambient_drift: Option<f64>,
+    /// Median relative error of the validation shot against the composite.
+    pub validation: Option<f64>,
+}
+
+/// `capture.json`: what a resumed capture needs, and what a person wants to know later.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct Record {
+    /// The camera's model.
+    pub camera: String,
+    /// Raw or JPEG.
+    pub format: Option<Format>,
+    /// The fitted camera response (JPEG), reused when resuming.
+    pub response: Option<Response>,
+    /// Lights written, by channel.
+    pub lights: BTreeMap<u32, LightRecord>,
+    /// Lights that showed no light, by channel.
+    pub no_light: BTreeMap<u32, String>,
+    /// Relative ambient change between start and end.
+    pub ambient_drift: Option<f64>,
+    /// Median relative error of the validation shot.
+    pub validation: Option<f64>,
+}
+
+/// One light as captured.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct LightRecord {
+    /// The basis image written (relative to the scene folder).
+    pub basis: String,
+    /// DMX universe, start address and the bytes its slots were sent.
+    pub dmx: (u16, u16, Vec<u8>),
+    /// The bracket's frames: EXIF exposure and the ratio fitted from the pixels.
+    pub exposures: Vec<ExposureFit>,
+    /// Pixels clipped in every frame (0 unless the light is too bright for the camera).
+    pub clipped: usize,
+    /// When it was written (Unix seconds).
+    pub time: u64,
+}
+
+/// Where the capture keeps its working files inside the scene folder.
+fn work_dir(scene_dir: &Path) -> PathBuf {
+    scene_dir.join("capture")
+}
+
+fn record_path(scene_dir: &Path) -> PathBuf {
+    scene_dir.join("capture.json")
+}
+
+/// Reads `capture.json`; none is an empty record.
+pub fn load_record(scene_dir: &Path) -> Result<Record, CaptureError> {
+    match visobjd_files::load_json::<Record>(&record_path(scene_dir)) {
+        visobjd_files::Loaded::Ok(r) => Ok(r),
+        visobjd_files::Loaded::Missing => Ok(Record::default()),
+        visobjd_files::Loaded::MovedAside(at, why) => Err(CaptureError::Files(format!(
+            "capture.json {why}; it was kept as {} and the capture starts over",
+            at.display()
+        ))),
+    }
+}
+
+fn save_record(scene_dir: &Path, record: &Record) -> Result<(), CaptureError> {
+    visobjd_files::save_json(&record_path(scene_dir), record)
+        .map_err(|e| CaptureError::Files(format!("capture.json cannot be written: {e}")))
+}
+
+fn now() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs())
+}
+
+/// The session: the rig, the camera and what is known so far.
+struct Session<'a> {
+    scene: &'a Scene,
+    scene_dir: &'a Path,
+    output: &'a Output,
+    camera: &'a mut dyn Camera,
+    opts: &'a Options,
+    progress: &'a mut dyn Progress,
+    stop: &'a AtomicBool,
+    shutters: Vec<Shutter>,
+    iso: f64,
+    f_number: f64,
+    record: Record,
+    shots: u64,
+}
+
+/// Captures the scene's basis images (see the crate's documentation). `output` must be
+/// running with the scene's patch; the caller stops it (terminating its streams) however
+/// this returns.
+pub fn capture(
+    scene: &Scene,
+    scene_dir: &Path,
+    output: &Output,
+    camera: &mut dyn Camera,
+    opts: &Options,
+    progress: &mut dyn Progress,
+    stop: &AtomicBool,
+) -> Result<Summary, CaptureError> {
+    let description = camera.describe()?;
+    let settings = camera.settings()?;
+    if let Some(f) = &settings.image_format {
+        camera.set_config(&f.key, opts.format.name())?;
+    }
+    let number = |s: Option<&visobjd_camera::Setting>, default: f64| {
+        s.and_then(|s| s.current.trim_start_matches("f/").parse::<f64>().ok())
+            .unwrap_or(default)
+    };
+    let mut record = load_record(scene_dir)?;
+    if record.format.is_some_and(|f| f != opts.format) {
+        return Err(CaptureError::Files(format!(
+            "capture.json was made in {:?}; resume with the same --format, or move it aside to start over",
+            record.format
+        )));
+    }
+    record.camera = description.model;
+    record.format = Some(opts.format);
+    std::fs::create_dir_all(work_dir(scene_dir))
+        .map_err(|e| CaptureError::Files(format!("cannot make the capture folder: {e}")))?;
+    let mut s = Session {
+        scene,
+        scene_dir,
+        output,
+        opts,
+        progress,
+        stop,
+        shutters: settings.shutter.shutters(),
+        iso: number(settings.iso.as_ref(), 100.0),
+        f_number: number(settings.aperture.as_ref(), 8.0),
+        camera,
+        record,
+        shots: 0,
+    };
+    if s.shutters.is_empty() {
+        return Err(CaptureError::Files(
+            "the camera lists no shutter times: set its mode dial to M".into(),
+        ));
+    }
+    s.run()
+}
+
+impl Session<'_> {
+    fn run(&mut self) -> Result<Summary, CaptureError> {
+        let todo: Vec<usize> = (0..self.scene.lights.len())
+            .filter(|&l| {
+                let ch = self.scene.lights[l].channel;
+                self.opts.lights.as_ref().is_none_or(|w| w.contains(&ch))
+            })
+            .collect();
+        let mut summary = Summary::default();
+        self.progress.begin(todo.len());
+        if self.opts.format == Format::Jpeg && self.record.response.is_none() {
+            self.progress.step("camera response: a bracket of every light at full");
+            let all = Look {
+                levels: vec![WHITE; self.scene.lights.len()],
+            };
+            self.show(&all)?;
+            let shots = self.response_bracket()?;
+            let frames: Vec<_> = shots.iter().map(decode::Shot::frame).collect();
+            let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(self.opts.seed);
+            self.record.response = Some(Response::recover(&frames, &mut rng)?);
+            save_record(self.scene_dir, &self.record)?;
+        }
+        let ambient_path = work_dir(self.scene_dir).join("ambient-start.exr");
+        let ambient = match visobjd_compositor::basis::read_exr(&ambient_path) {
+            Ok(img) => Radiance {
+                width: img.width,
+                height: img.height,
+                pixels: img.pixels,
+            },
+            Err(_) => {
+                self.progress.step("ambient light: everything at 0");
+                let a = self.shoot_look(&Look::off(self.scene.lights.len()), Some(8.0))?.radiance;
+                visobjd_hdr::write_exr(&ambient_path, &a)?;
+                a
+            }
+        };
+        for l in todo {
+            let light = &self.scene.lights[l];
+            let (ch, name) = (light.channel, light.name.clone());
+            if self.record.lights.contains_key(&ch) && light.basis.is_file() {
+                summary.resumed.push(ch);
+                self.progress.light_done();
+                continue;
+            }
+            if self.stop.load(Ordering::SeqCst) {
+                return Err(CaptureError::Stopped);
+            }
+            self.progress.step(&format!("light {ch} ({name})"));
+            let mut look = Look::off(self.scene.lights.len());
+            look.levels[l] = WHITE;
+            let merged = self.shoot_look(&look, None)?;
+            let test = visobjd_hdr::light_test(&merged.radiance, &ambient)?;
+            if !test.shows_light {
+                let why = format!(
+                    "light {ch} ({name}) shows no light: unpatched, lamp out, or aimed out of frame?"
+                );
+                self.progress.warn(&why);
+                self.record.no_light.insert(ch, why.clone());
+                summary.no_light.push((ch, why));
+                save_record(self.scene_dir, &self.record)?;
+                self.progress.light_done();
+                continue;
+            }
+            if merged.clipped_everywhere > 0 {
+                self.progress.warn(&format!(
+                    "light {ch} ({name}): {} pixels are clipped even at the shortest exposure: close the aperture or lower the ISO",
+                    merged.clipped_everywhere
+                ));
+            }
+            let basis = visobjd_hdr::subtract_ambient(&merged.radiance, &ambient)?;
+            visobjd_hdr::write_exr(&light.basis, &basis)?;
+            self.record.no_light.remove(&ch);
+            self.record.lights.insert(
+                ch,
+                LightRecord {
+                    basis: light
+                        .basis
+                        .strip_prefix(self.scene_dir)
+                        .unwrap_or(&light.basis)
+                        .display()
+                        .to_string(),
+                    dmx: self.dmx_of(l, &look),
+                    exposures: merged.exposures,
+                    clipped: merged.clipped_everywhere,
+                    time: now(),
+                },
+            );
+            save_record(self.scene_dir, &self.record)?;
+            summary.captured.push(ch);
+            self.progress.light_done();
+        }
+        self.progress.step("ambient light again: everything at 0");
+        let end = self
+            .shoot_look(&Look::off(self.scene.lights.len()), Some(8.0))?
+            .radiance;
+        let drift = visobjd_hdr::ambient_drift(&ambient, &end)?;
+        if drift.relative > 0.05 {
+            self.progress.warn(&format!(
+                "the ambient light changed by {:.0}% between the start and the end (work lights, a door, daylight?): the basis images carry the difference",
+                drift.relative * 100.0
+            ));
+        }
+        summary.ambient_drift = Some(drift.relative);
+        self.record.ambient_drift = summary.ambient_drift;
+        summary.validation = self.validate(&ambient)?;
+        self.record.validation = summary.validation;
+        save_record(self.scene_dir, &self.record)?;
+        Ok(summary)
+    }
+
+    /// Puts `look` on the rig and waits for the lamps and for frames that carry it.
+    fn show(&mut self, look: &Look) -> Result<(), CaptureError> {
+        self.output.set_look(look.clone(), 0.0);
+        let ticks = self.output.stats().ticks;
+        std::thread::sleep(self.opts.settle);
+        let deadline = Instant::now() + Duration::from_secs(5);
+        while self.output.stats().ticks < ticks + 2 {
+            if Instant::now() > deadline {
+                return Err(CaptureError::Files(
+                    "the DMX output is not sending: check the [output] destinations".into(),
+                ));
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        Ok(())
+    }
+
+    /// One frame at `shutter`, decoded; its file is removed once read.
+    fn shoot(&mut self, shutter: &Shutter) -> Result<decode::Shot, CaptureError> {
+        if self.stop.load(Ordering::SeqCst) {
+            return Err(CaptureError::Stopped);
+        }
+        self.shots += 1;
+        let out = work_dir(self.scene_dir).join(format!("shot-{}", self.shots));
+        let frame = self.camera.capture(shutter, &out)?;
+        let path = frame
+            .paths
+            .iter()
+            .find(|p| {
+                let ext = p.extension().map(|e| e.to_string_lossy().to_lowercase());
+                match self.opts.format {
+                    Format::Jpeg => matches!(ext.as_deref(), Some("jpg" | "jpeg")),
+                    Format::Raw => !matches!(ext.as_deref(), Some("jpg" | "jpeg")),
+                }
+            })
+            .or(frame.paths.first())
+            .cloned()
+            .ok_or_else(|| CaptureError::Files("the camera wrote no file".into()))?;
+        let exposure = visobjd_hdr::Exposure {
+            seconds: frame.exposure.seconds,
+            iso: frame.exposure.iso.unwrap_or(self.iso),
+            f_number: frame.exposure.f_number.unwrap_or(self.f_number),
+        };
+        let shot = decode::load(&path, exposure).map_err(CaptureError::Files);
+        for p in &frame.paths {
+            let _ = std::fs::remove_file(p);
+        }
+        shot
+    }
+
+    /// The shutter choice nearest to `seconds` (in stops).
+    fn nearest(&self, seconds: f64) -> Shutter {
+        self.shutters
+            .iter()
+            .min_by(|a, b| {
+                let d = |s: &Shutter| (s.seconds() / seconds).log2().abs();
+                d(a).total_cmp(&d(b))
+            })
+            .cloned()
+            .unwrap_or_else(|| self.shutters[0].clone())
+    }
+
+    /// Seven frames a stop apart around a metered exposure, for the camera response.
+    fn response_bracket(&mut self) -> Result<Vec<decode::Shot>, CaptureError> {
+        let meter = self.meter(None)?;
+        let bracket = visobjd_hdr::propose_bracket(
+            &meter.frame(),
+            None,
+            &self.choices(),
+            &BracketSettings::default(),
+        )?;
+        let centre = (bracket.times.first().copied().unwrap_or(1.0 / 60.0)
+            * bracket.times.last().copied().unwrap_or(1.0 / 60.0))
+        .sqrt();
+        let mut shots = Vec::new();
+        for k in -3..=3 {
+            let s = self.nearest(centre * 2f64.powi(k));
+            shots.push(self.shoot(&s)?);
+        }
+        Ok(shots)
+    }
+
+    fn choices(&self) -> Vec<f64> {
+        self.shutters.iter().map(Shutter::seconds).collect()
+    }
+
+    /// A metering frame, at 1/60 s, shortened once if it clipped.
+    fn meter(&mut self, response: Option<&Response>) -> Result<decode::Shot, CaptureError> {
+        let first = self.shoot(&self.nearest(1.0 / 60.0))?;
+        let b = visobjd_hdr::propose_bracket(
+            &first.frame(),
+            response,
+            &self.choices(),
+            &BracketSettings::default(),
+        )?;
+        if b.meter_clipped {
+            let shortest = b.times.first().copied().unwrap_or(1.0 / 4000.0);
+            return self.shoot(&self.nearest(shortest));
+        }
+        Ok(first)
+    }
+
+    /// Shows `look`, meters, shoots the proposed bracket (no exposure over `longest` s)
+    /// and merges it.
+    fn shoot_look(
+        &mut self,
+        look: &Look,
+        longest: Option<f64>,
+    ) -> Result<visobjd_hdr::Merged, CaptureError> {
+        self.show(look)?;
+        let response = self.record.response.clone();
+        let meter = self.meter(response.as_ref())?;
+        let mut times = visobjd_hdr::propose_bracket(
+            &meter.frame(),
+            response.as_ref(),
+            &self.choices(),
+            &BracketSettings::default(),
+        )?
+        .times;
+        if let Some(max) = longest {
+            times.retain(|&t| t <= max);
+        }
+        if times.is_empty() {
+            times.push(self.nearest(longest.unwrap_or(1.0)).seconds());
+        }
+        self.progress
+            .step(&format!("bracket of {} frames", times.len()));
+        let mut shots = Vec::with_capacity(times.len());
+        for t in times {
+            shots.push(self.shoot(&self.nearest(t))?);
+        }
+        let frames: Vec<_> = shots.iter().map(decode::Shot::frame).collect();
+        let settings = MergeSettings {
+            width: Some(self.opts.width),
+            ..MergeSettings::default()
+        };
+        Ok(visobjd_hdr::merge(&frames, response.as_ref(), &settings)?)
+    }
+
+    /// The bytes light `l`'s slots are sent for `look`.
+    fn dmx_of(&self, l: usize, look: &Look) -> (u16, u16, Vec<u8>) {
+        let patch = Patch::new(self.scene);
+        let bytes = patch.quantise(&patch.unmastered(look));
+        let light = &self.scene.lights[l];
+        let u = patch
+            .universes()
+            .binary_search(&light.universe)
+            .unwrap_or_default();
+        let start = usize::from(light.address.max(1)) - 1;
+        let end = (start + self.scene.profile(l).footprint()).min(bytes[u].len());
+        (light.universe, light.address, bytes[u][start..end].to_vec())
+    }
+
+    /// A random look of a few captured lights, shot and compared with the composite of
+    /// their basis images: the median relative error over the pixels the look lights.
+    fn validate(&mut self, ambient: &Radiance) -> Result<Option<f64>, CaptureError> {
+        let captured: Vec<usize> = (0..self.scene.lights.len())
+            .filter(|&l| self.record.lights.contains_key(&self.scene.lights[l].channel))
+            .collect();
+        if captured.is_empty() {
+            return Ok(None);
+        }
+        self.progress.step("validation: a random look of several lights");
+        let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(self.opts.seed ^ 0x5eed);
+        let mut look = Look::off(self.scene.lights.len());
+        let mut composite: Option<Radiance> = None;
+        for _ in 0..captured.len().min(4) {
+            let l = captured[rng.random_range(0..captured.len())];
+            let level = rng.random_range(0.3f32..1.0);
+            look.levels[l] = Level {
+                intensity: level,
+                color: [1.0; 3],
+            };
+        }
+        for (l, lv) in look.levels.iter().enumerate() {
+            if lv.intensity == 0.0 {
+                continue;
+            }
+            let img = visobjd_compositor::basis::read_exr(&self.scene.lights[l].basis)
+                .map_err(CaptureError::Files)?;
+            let c = composite.get_or_insert_with(|| Radiance {
+                width: img.width,
+                height: img.height,
+                pixels: vec![[0.0; 3]; img.pixels.len()],
+            });
+            if c.pixels.len() != img.pixels.len() {
+                return Err(CaptureError::Files(
+                    "the basis images differ in size: capture them again together".into(),
+                ));
+            }
+            let m = lv.multiplier();
+            for (o, p) in c.pixels.iter_mut().zip(&img.pixels) {
+                for k in 0..3 {
+                    o[k] += m[k] * p[k];
+                }
+            }
+        }
+        let Some(composite) = composite else {
+            return Ok(None);
+        };
+        let shot = self.shoot_look(&look, None)?.radiance;
+        let shot = visobjd_hdr::subtract_ambient(&shot, ambient)?;
+        Ok(relative_error(&shot, &composite))
+    }
+}
+
+/// Every light at full white: how capture asks a light for its basis.
+const WHITE: Level = Level {
+    intensity: 1.0,
+    color: [1.0; 3],
+};
+
+/// Median relative error of `got` against `want` over the pixels `want` lights (above 5%
+/// of its brightest luminance).
+pub fn relative_error(got: &Radiance, want: &Radiance) -> Option<f64> {
+    if got.pixels.len() != want.pixels.len() {
+        return None;
+    }
+    let lum = |p: &[f32; 3]| 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2];
+    let peak = want.pixels.iter().map(lum).fold(0.0f32, f32::max);
+    let mut errors: Vec<f32> = got
+        .pixels
+        .iter()
+        .zip(&want.pixels)
+        .filter(|(_, w)| lum(w) > 0.05 * peak)
+        .map(|(g, w)| ((lum(g) - lum(w)) / lum(w)).abs())
+        .collect();
+    if errors.is_empty() {
+        return None;
+    }
+    errors.sort_by(f32::total_cmp);
+    Some(f64::from(errors[errors.len() / 2]))
+}

@@ -1,0 +1,198 @@
+//! `visobjd capture`: a real rig's basis images, shot light by light with a tethered
+//! camera (docs/capture.md). Capture drives the rig over the config's `[output]`
+//! destinations at its own sACN priority (`[capture] priority`, default 200, so the
+//! console can stay connected), and terminates its streams at the end, on Ctrl-C or on an
+//! error, so the console takes the rig back.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+use std::time::Duration;
+
+use anyhow::Context;
+use visobjd_capture::{Format, Options, Progress};
+use visobjd_dmx::{Output, Patch, SacnDest};
+use visobjd_scene::Scene;
+use visobjd_scene::look::Look;
+
+use crate::config::Config;
+
+/// Arguments of `capture`.
+#[derive(clap::Args)]
+pub struct Args {
+    /// The config file: its scene (basis images may be missing) and `[output]`.
+    #[arg(long)]
+    config: PathBuf,
+    /// `gphoto2`, `sim` (a simulated camera photographing the scene's own basis images),
+    /// or `command:TEMPLATE` with `{exposure}` and `{out}`.
+    #[arg(long, default_value = "gphoto2")]
+    camera: String,
+    /// Channels to shoot, as `1-44,50` (default: every light).
+    #[arg(long)]
+    lights: Option<String>,
+    /// Seconds a light is given to reach its level (default `[capture] settle_s`).
+    #[arg(long)]
+    settle: Option<f64>,
+    /// What the camera writes: `jpeg`, or `raw` (linear 16-bit TIFF; camera raw formats
+    /// are not read yet).
+    #[arg(long, default_value = "jpeg")]
+    format: String,
+    /// Basis width in pixels (the height follows the camera's aspect).
+    #[arg(long, default_value_t = 480)]
+    width: usize,
+    /// Seed of the validation look (and of the sim camera's noise).
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+}
+
+/// `1-44,50` as channels.
+fn channels(spec: &str) -> Result<Vec<u32>, String> {
+    let mut out = Vec::new();
+    for part in spec.split(',').map(str::trim).filter(|p| !p.is_empty()) {
+        let bad = || format!("--lights {spec}: `{part}` is not a channel or a range like 1-44");
+        let (a, b) = match part.split_once('-') {
+            Some((a, b)) => (a.trim(), b.trim()),
+            None => (part, part),
+        };
+        let (a, b): (u32, u32) = (a.parse().map_err(|_| bad())?, b.parse().map_err(|_| bad())?);
+        if a > b || b - a > 100_000 {
+            return Err(bad());
+        }
+        out.extend(a..=b);
+    }
+    Ok(out)
+}
+
+/// A progress bar with the light being shot and the time left.
+struct Bar(indicatif::ProgressBar);
+
+impl Progress for Bar {
+    fn begin(&mut self, lights: usize) {
+        self.0.set_length(lights as u64);
+        self.0.set_style(
+            indicatif::ProgressStyle::with_template(
+                "{bar:30} {pos}/{len} lights, {eta} left: {msg}",
+            )
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+    }
+    fn step(&mut self, what: &str) {
+        self.0.set_message(what.to_string());
+    }
+    fn light_done(&mut self) {
+        self.0.inc(1);
+    }
+    fn warn(&mut self, what: &str) {
+        self.0.suspend(|| eprintln!("warning: {what}"));
+        tracing::warn!("{what}");
+    }
+}
+
+/// Runs a capture; an error, a stop, or a light that shows no light exits non-zero.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let config = Config::load(&args.config).map_err(anyhow::Error::msg)?;
+    let scene = Scene::load(&config.scene)?;
+    let format = Format::parse(&args.format).map_err(anyhow::Error::msg)?;
+    let lights = args
+        .lights
+        .as_deref()
+        .map(channels)
+        .transpose()
+        .map_err(anyhow::Error::msg)?;
+    if let Some(missing) = lights
+        .iter()
+        .flatten()
+        .find(|ch| scene.light_index(**ch).is_none())
+    {
+        anyhow::bail!(
+            "--lights: light {missing} is not in the scene ({})",
+            scene.channel_range()
+        );
+    }
+    let settle = args.settle.unwrap_or(config.capture.settle_s);
+    anyhow::ensure!(
+        settle.is_finite() && (0.0..=60.0).contains(&settle),
+        "--settle must be 0..=60 seconds"
+    );
+    let mut output_config = config.output.clone();
+    for d in &mut output_config.sacn {
+        d.priority = config.capture.priority;
+    }
+    let mut camera: Box<dyn visobjd_camera::Camera + Send> = if args.camera == "sim" {
+        let sim = visobjd_capture::sim::SimCamera::new(&scene, format, args.seed)
+            .map_err(anyhow::Error::msg)?;
+        let at = sim.listens_on().context("the sim camera's address")?;
+        output_config.sacn.push(SacnDest {
+            destination: at.ip().to_string(),
+            port: at.port(),
+            priority: config.capture.priority,
+            source_name: "visobjd capture".into(),
+            ..SacnDest::default()
+        });
+        Box::new(sim)
+    } else {
+        visobjd_camera::open(
+            &args.camera,
+            visobjd_camera::Options {
+                timeout: Duration::from_secs_f64(config.capture.camera_timeout_s),
+                ..visobjd_camera::Options::default()
+            },
+        )?
+    };
+    let stop = Arc::new(AtomicBool::new(false));
+    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        signal_hook::flag::register(signal, Arc::clone(&stop))
+            .context("cannot watch Ctrl-C")?;
+    }
+    // Capture's own CID (kept beside its records), never the daemon's: both may run.
+    let output = Output::start(
+        &output_config,
+        Patch::new(&scene),
+        &config.scene.join("capture"),
+        Look::off(scene.lights.len()),
+    )?;
+    let options = Options {
+        lights,
+        settle: Duration::from_secs_f64(settle),
+        width: args.width.max(1),
+        format,
+        seed: args.seed,
+    };
+    let mut bar = Bar(indicatif::ProgressBar::new(0));
+    let result = visobjd_capture::capture(
+        &scene,
+        &config.scene,
+        &output,
+        camera.as_mut(),
+        &options,
+        &mut bar,
+        &stop,
+    );
+    bar.0.finish_and_clear();
+    // Stream_Terminated on every universe: the console takes the rig back at once.
+    output.shutdown();
+    let summary = result?;
+    println!(
+        "capture: {} lights written, {} already done, {} showing no light",
+        summary.captured.len(),
+        summary.resumed.len(),
+        summary.no_light.len()
+    );
+    if let Some(d) = summary.ambient_drift {
+        println!("ambient drift between start and end: {:.1}%", d * 100.0);
+    }
+    if let Some(v) = summary.validation {
+        println!(
+            "validation: a random look shot and composited from the basis differ by {:.1}% (median over the lit pixels)",
+            v * 100.0
+        );
+    }
+    if !summary.no_light.is_empty() {
+        for (_, why) in &summary.no_light {
+            eprintln!("{why}");
+        }
+        let list: Vec<String> = summary.no_light.iter().map(|(ch, _)| ch.to_string()).collect();
+        anyhow::bail!("lights {} show no light", list.join(", "));
+    }
+    Ok(())
+}
