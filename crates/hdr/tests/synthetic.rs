@@ -99,7 +99,6 @@ fn recovered_response(s: &Shot<u8>) -> Response {
 }
 
 #[test]
-#[ignore = "known failure: plain Robertson drifts into the log-periodic ambiguity of a bracket with equal 2-stop steps (23% shape error); needs a smoothness prior"]
 fn recovered_response_has_the_true_shape() {
     let map = radiance_map(W, H, false);
     let shot = jpeg_shot(&map, 1);
@@ -156,7 +155,6 @@ fn raw_merge_is_within_2_percent_and_fits_the_true_ratios() {
 }
 
 #[test]
-#[ignore = "known failure: plain Robertson drifts into the log-periodic ambiguity of a bracket with equal 2-stop steps (11% median merge error); needs a smoothness prior"]
 fn jpeg_merge_is_within_2_percent_and_fits_the_true_ratios() {
     let map = radiance_map(W, H, false);
     let cal = jpeg_shot(&map, 3);
