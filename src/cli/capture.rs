@@ -119,7 +119,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         d.priority = config.capture.priority;
     }
     let mut camera: Box<dyn visobjd_camera::Camera + Send> = if args.camera == "sim" {
-        let sim = visobjd_capture::sim::SimCamera::new(&scene, format, args.seed)
+        let sim = visobjd_capture::sim::SimCamera::new(&scene, &config.scene, format, args.seed)
             .map_err(anyhow::Error::msg)?;
         let at = sim.listens_on().context("the sim camera's address")?;
         output_config.sacn.push(SacnDest {
@@ -141,8 +141,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     let stop = Arc::new(AtomicBool::new(false));
     for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
-        signal_hook::flag::register(signal, Arc::clone(&stop))
-            .context("cannot watch Ctrl-C")?;
+        signal_hook::flag::register(signal, Arc::clone(&stop)).context("cannot watch Ctrl-C")?;
     }
     // Capture's own CID (kept beside its records), never the daemon's: both may run.
     let output = Output::start(
@@ -191,7 +190,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         for (_, why) in &summary.no_light {
             eprintln!("{why}");
         }
-        let list: Vec<String> = summary.no_light.iter().map(|(ch, _)| ch.to_string()).collect();
+        let list: Vec<String> = summary
+            .no_light
+            .iter()
+            .map(|(ch, _)| ch.to_string())
+            .collect();
         anyhow::bail!("lights {} show no light", list.join(", "));
     }
     Ok(())

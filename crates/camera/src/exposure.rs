@@ -61,9 +61,13 @@ pub fn read_exposure(path: &Path) -> Result<Option<Exposure>, Error> {
             });
         }
     };
-    // kamadak-exif files the Exif sub-IFD's fields under the primary image (IFD0).
+    // kamadak-exif files the Exif sub-IFD's fields under the primary image (IFD0). TIFF/EP
+    // raw files (and TIFFs written by simple tools) carry the same tags in IFD0 itself,
+    // which it reads as TIFF-context tags of the same number: take either.
     let number = |tag: Tag| -> Option<f64> {
-        let field = exif.get_field(tag, In::PRIMARY)?;
+        let field = exif
+            .get_field(tag, In::PRIMARY)
+            .or_else(|| exif.get_field(Tag(exif::Context::Tiff, tag.number()), In::PRIMARY))?;
         let value = match &field.value {
             exif::Value::Rational(v) => v.first().map(|r| r.to_f64()),
             exif::Value::SRational(v) => v.first().map(|r| r.to_f64()),

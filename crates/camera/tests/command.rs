@@ -1,21 +1,12 @@
 //! The command template camera: shell-free argv from a template, the exposure from the
 //! written file's EXIF when it has one, else the request (and the frame says so).
 
+mod fake;
+
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 use visobjd_camera::{Error, ExposureSource, Options, Shutter, open};
-
-/// Same rule as the root's `tests/common/tools.rs`: skip with a note, fail under CI=true.
-fn missing(tool: &str, remedy: &str) {
-    let text = format!("{tool} is not available (to fix: {remedy})");
-    assert!(
-        std::env::var("CI").map_or(true, |v| v != "true"),
-        "CI=true and {text}"
-    );
-    println!("note: test skipped: {text}; under CI=true this fails");
-}
 
 fn folder(name: &str) -> PathBuf {
     let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
@@ -51,15 +42,7 @@ fn a_file_without_exif_gives_the_requested_exposure_marked_assumed() {
 
 #[test]
 fn a_file_with_exif_gives_its_exposure_not_the_request() {
-    let ready = Command::new("python3")
-        .args(["-c", "import PIL, piexif, numpy"])
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if !ready {
-        missing(
-            "python3 with Pillow, piexif and numpy (the fake gphoto2)",
-            "python3 -m pip install pillow piexif numpy",
-        );
+    if !fake::ready() {
         return;
     }
     let dir = folder("exif");

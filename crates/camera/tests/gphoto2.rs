@@ -3,24 +3,14 @@
 //! tool would be. The fake keeps its state in a JSON file and logs each call's argv, so a
 //! test can tell how many processes ran.
 
+mod fake;
+
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Duration;
 
 use visobjd_camera::{Camera, Error, ExposureSource, Gphoto2, Options, Shutter};
-
-/// Whether this is a CI run (`CI=true`): there a missing tool fails the test instead of
-/// skipping it, because CI installs every tool (`.ci/run`). Same rule as the root's
-/// `tests/common/tools.rs`.
-fn missing(tool: &str, remedy: &str) {
-    let text = format!("{tool} is not available (to fix: {remedy})");
-    assert!(
-        std::env::var("CI").map_or(true, |v| v != "true"),
-        "CI=true and {text}"
-    );
-    println!("note: test skipped: {text}; under CI=true this fails");
-}
 
 /// The fake camera's folder: a `bin/gphoto2` link to the fake, its state and its log.
 struct Rig {
@@ -33,15 +23,7 @@ impl Rig {
     /// A fresh rig for test `name` with extra fake settings `env`; `None` (after a note,
     /// or a failure under CI) when python3 with Pillow, piexif and numpy is missing.
     fn new(name: &str, env: &[(&str, &str)]) -> Option<Rig> {
-        let ready = Command::new("python3")
-            .args(["-c", "import PIL, piexif, numpy"])
-            .output()
-            .is_ok_and(|o| o.status.success());
-        if !ready {
-            missing(
-                "python3 with Pillow, piexif and numpy (the fake gphoto2)",
-                "python3 -m pip install pillow piexif numpy",
-            );
+        if !fake::ready() {
             return None;
         }
         let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
@@ -78,6 +60,11 @@ impl Rig {
     }
 
     /// The argv of every call the fake received, one line each.
+    /// How many logged calls contain `needle`.
+    fn count(&self, needle: &str) -> usize {
+        self.calls().iter().filter(|c| c.contains(needle)).count()
+    }
+
     fn calls(&self) -> Vec<String> {
         std::fs::read_to_string(&self.log)
             .unwrap_or_default()
@@ -204,11 +191,7 @@ fn set_config_surfaces_gphoto2s_refusal() {
         text.contains("--set-config iso=6400"),
         "names the call: {text}"
     );
-    let sets = rig
-        .calls()
-        .iter()
-        .filter(|c| c.contains("iso=6400"))
-        .count();
+    let sets = rig.count("iso=6400");
     assert_eq!(sets, 1, "a refused value is not retried");
 }
 
@@ -242,11 +225,7 @@ fn capture_returns_the_exposure_the_file_records() {
         .output()
         .expect("python3");
     assert_eq!(String::from_utf8_lossy(&read.stdout).trim(), "(1, 64)");
-    let shots = rig
-        .calls()
-        .iter()
-        .filter(|c| c.contains("--capture-image-and-download"))
-        .count();
+    let shots = rig.count("--capture-image-and-download");
     assert_eq!(shots, 1);
 }
 
@@ -279,11 +258,7 @@ fn a_hang_is_killed_at_the_timeout_and_retried_once() {
         .expect("the retry succeeds");
     assert!(frame.paths[0].is_file());
     assert_eq!(frame.exposure.seconds, 1.0 / 128.0);
-    let shots = rig
-        .calls()
-        .iter()
-        .filter(|c| c.contains("--capture-image-and-download"))
-        .count();
+    let shots = rig.count("--capture-image-and-download");
     assert_eq!(shots, 2, "one try, one retry");
 }
 
@@ -303,11 +278,7 @@ fn a_persistent_hang_is_an_error_that_says_timed_out() {
         text.contains("timed out") && text.contains("--capture-image-and-download"),
         "{text}"
     );
-    let shots = rig
-        .calls()
-        .iter()
-        .filter(|c| c.contains("--capture-image-and-download"))
-        .count();
+    let shots = rig.count("--capture-image-and-download");
     assert_eq!(shots, 2, "one try, one retry");
 }
 
@@ -350,10 +321,6 @@ fn capture_refuses_a_shutter_the_camera_does_not_offer() {
         .capture(&shutter("1/7"), &rig.dir.join("f.jpg"))
         .expect_err("1/7 is no choice");
     assert!(matches!(err, Error::NotAChoice { .. }), "{err:?}");
-    let shots = rig
-        .calls()
-        .iter()
-        .filter(|c| c.contains("--capture-image-and-download"))
-        .count();
+    let shots = rig.count("--capture-image-and-download");
     assert_eq!(shots, 0);
 }

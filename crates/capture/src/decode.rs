@@ -38,6 +38,31 @@ pub struct Shot {
 }
 
 impl Shot {
+    /// The 99.9th percentile of the frame's samples as a fraction of full scale: how
+    /// close its brightest pixels come to clipping.
+    pub fn high(&self) -> f64 {
+        let mut v: Vec<f64> = match &self.pixels {
+            Pixels::Jpeg(p) => p.iter().map(|&c| f64::from(c) / 255.0).collect(),
+            Pixels::Raw {
+                values,
+                black,
+                white,
+            } => {
+                let span = f64::from(white - black);
+                values
+                    .iter()
+                    .map(|&x| f64::from(x.saturating_sub(*black)) / span)
+                    .collect()
+            }
+        };
+        if v.is_empty() {
+            return 0.0;
+        }
+        let k = (v.len() - 1) * 999 / 1000;
+        v.select_nth_unstable_by(k, f64::total_cmp);
+        v[k]
+    }
+
     /// The shot as the merge takes it (borrowed, not copied).
     pub fn frame(&self) -> visobjd_hdr::Frame<'_> {
         visobjd_hdr::Frame {
@@ -93,8 +118,10 @@ pub fn load(path: &Path, exposure: visobjd_hdr::Exposure) -> Result<Shot, String
 fn raw_tiff(path: &Path, exposure: visobjd_hdr::Exposure) -> Result<Shot, String> {
     use tiff::decoder::{Decoder, DecodingResult};
     use tiff::tags::Tag;
-    let bad = |e: &dyn std::fmt::Display| format!("{}: not a readable raw TIFF: {e}", path.display());
-    let file = std::fs::File::open(path).map_err(|e| format!("{}: cannot open it: {e}", path.display()))?;
+    let bad =
+        |e: &dyn std::fmt::Display| format!("{}: not a readable raw TIFF: {e}", path.display());
+    let file = std::fs::File::open(path)
+        .map_err(|e| format!("{}: cannot open it: {e}", path.display()))?;
     let mut d = Decoder::new(std::io::BufReader::new(file)).map_err(|e| bad(&e))?;
     let (w, h) = d.dimensions().map_err(|e| bad(&e))?;
     let level = |d: &mut Decoder<_>, tag: u16, default: u16| {

@@ -269,7 +269,8 @@ impl Session<'_> {
         let mut summary = Summary::default();
         self.progress.begin(todo.len());
         if self.opts.format == Format::Jpeg && self.record.response.is_none() {
-            self.progress.step("camera response: a bracket of every light at full");
+            self.progress
+                .step("camera response: a bracket of every light at full");
             let all = Look {
                 levels: vec![WHITE; self.scene.lights.len()],
             };
@@ -280,20 +281,10 @@ impl Session<'_> {
             self.record.response = Some(Response::recover(&frames, &mut rng)?);
             save_record(self.scene_dir, &self.record)?;
         }
-        let ambient_path = work_dir(self.scene_dir).join("ambient-start.exr");
-        let ambient = match visobjd_compositor::basis::read_exr(&ambient_path) {
-            Ok(img) => Radiance {
-                width: img.width,
-                height: img.height,
-                pixels: img.pixels,
-            },
-            Err(_) => {
-                self.progress.step("ambient light: everything at 0");
-                let a = self.shoot_look(&Look::off(self.scene.lights.len()), Some(8.0))?.radiance;
-                visobjd_hdr::write_exr(&ambient_path, &a)?;
-                a
-            }
-        };
+        let ambient = self.ambient("ambient-start.exr")?;
+        // A second look at the same dark stage: how much two merges of the same light
+        // differ, the measure a light must clearly exceed to show light.
+        let again = self.ambient("ambient-again.exr")?;
         for l in todo {
             let light = &self.scene.lights[l];
             let (ch, name) = (light.channel, light.name.clone());
@@ -308,8 +299,19 @@ impl Session<'_> {
             self.progress.step(&format!("light {ch} ({name})"));
             let mut look = Look::off(self.scene.lights.len());
             look.levels[l] = WHITE;
-            let merged = self.shoot_look(&look, None)?;
-            let test = visobjd_hdr::light_test(&merged.radiance, &ambient)?;
+            let merged = self.shoot_look(&look, false)?;
+            let mut test = visobjd_hdr::light_test(&merged.radiance, &ambient)?;
+            let above = above_null(&merged.radiance, &ambient, &again);
+            test.shows_light &= above >= test.min_lit_pixels;
+            tracing::debug!(
+                "light {ch}: {test:?}; exposures {:?}; clipped {}; mean {:?} ambient {:?} size {}x{}",
+                merged.exposures,
+                merged.clipped_everywhere,
+                merged.radiance.mean(),
+                ambient.mean(),
+                merged.radiance.width,
+                merged.radiance.height
+            );
             if !test.shows_light {
                 let why = format!(
                     "light {ch} ({name}) shows no light: unpatched, lamp out, or aimed out of frame?"
@@ -351,7 +353,7 @@ impl Session<'_> {
         }
         self.progress.step("ambient light again: everything at 0");
         let end = self
-            .shoot_look(&Look::off(self.scene.lights.len()), Some(8.0))?
+            .shoot_look(&Look::off(self.scene.lights.len()), true)?
             .radiance;
         let drift = visobjd_hdr::ambient_drift(&ambient, &end)?;
         if drift.relative > 0.05 {
@@ -366,6 +368,25 @@ impl Session<'_> {
         self.record.validation = summary.validation;
         save_record(self.scene_dir, &self.record)?;
         Ok(summary)
+    }
+
+    /// The ambient light (everything at 0) merged once per capture and kept in the
+    /// capture folder as `name`, so a resumed capture subtracts the same one.
+    fn ambient(&mut self, name: &str) -> Result<Radiance, CaptureError> {
+        let path = work_dir(self.scene_dir).join(name);
+        if let Ok(img) = visobjd_compositor::basis::read_exr(&path) {
+            return Ok(Radiance {
+                width: img.width,
+                height: img.height,
+                pixels: img.pixels,
+            });
+        }
+        self.progress.step("ambient light: everything at 0");
+        let a = self
+            .shoot_look(&Look::off(self.scene.lights.len()), true)?
+            .radiance;
+        visobjd_hdr::write_exr(&path, &a)?;
+        Ok(a)
     }
 
     /// Puts `look` on the rig and waits for the lamps and for frames that carry it.
@@ -430,21 +451,12 @@ impl Session<'_> {
             .unwrap_or_else(|| self.shutters[0].clone())
     }
 
-    /// Seven frames a stop apart around a metered exposure, for the camera response.
+    /// Seven frames a stop apart around the metered exposure, for the camera response.
     fn response_bracket(&mut self) -> Result<Vec<decode::Shot>, CaptureError> {
-        let meter = self.meter(None)?;
-        let bracket = visobjd_hdr::propose_bracket(
-            &meter.frame(),
-            None,
-            &self.choices(),
-            &BracketSettings::default(),
-        )?;
-        let centre = (bracket.times.first().copied().unwrap_or(1.0 / 60.0)
-            * bracket.times.last().copied().unwrap_or(1.0 / 60.0))
-        .sqrt();
+        let (_, t) = self.meter()?;
         let mut shots = Vec::new();
         for k in -3..=3 {
-            let s = self.nearest(centre * 2f64.powi(k));
+            let s = self.nearest(t * 2f64.powi(k));
             shots.push(self.shoot(&s)?);
         }
         Ok(shots)
@@ -454,51 +466,82 @@ impl Session<'_> {
         self.shutters.iter().map(Shutter::seconds).collect()
     }
 
-    /// A metering frame, at 1/60 s, shortened once if it clipped.
-    fn meter(&mut self, response: Option<&Response>) -> Result<decode::Shot, CaptureError> {
-        let first = self.shoot(&self.nearest(1.0 / 60.0))?;
-        let b = visobjd_hdr::propose_bracket(
-            &first.frame(),
-            response,
-            &self.choices(),
-            &BracketSettings::default(),
-        )?;
-        if b.meter_clipped {
-            let shortest = b.times.first().copied().unwrap_or(1.0 / 4000.0);
-            return self.shoot(&self.nearest(shortest));
+    /// A metering frame whose brightest pixels (the 99.9th percentile) sit high but
+    /// unclipped, found from 1/60 s by trial (the camera's response may not be known
+    /// yet, so the frame's own values are read); with its exposure time.
+    fn meter(&mut self) -> Result<(decode::Shot, f64), CaptureError> {
+        let (shortest, longest) = self.shutters_range();
+        let longest = longest.min(LONGEST);
+        let mut t = 1.0 / 60.0;
+        let mut shot = self.shoot(&self.nearest(t))?;
+        for _ in 0..10 {
+            let high = shot.high();
+            let factor = if high >= 0.97 {
+                0.25
+            } else if high < METERED {
+                (0.6 / high.max(1e-3)).min(16.0)
+            } else {
+                break;
+            };
+            let next = (t * factor).clamp(shortest, longest);
+            if self.nearest(next).seconds() == self.nearest(t).seconds() {
+                break;
+            }
+            t = next;
+            shot = self.shoot(&self.nearest(t))?;
         }
-        Ok(first)
+        Ok((shot, self.nearest(t).seconds()))
     }
 
-    /// Shows `look`, meters, shoots the proposed bracket (no exposure over `longest` s)
-    /// and merges it.
-    fn shoot_look(
-        &mut self,
-        look: &Look,
-        longest: Option<f64>,
-    ) -> Result<visobjd_hdr::Merged, CaptureError> {
+    /// The shortest and longest shutter times the camera offers.
+    fn shutters_range(&self) -> (f64, f64) {
+        self.choices()
+            .into_iter()
+            .fold((f64::MAX, 0.0f64), |(a, b), t| (a.min(t), b.max(t)))
+    }
+
+    /// Shows `look`, meters, shoots the bracket the metering frame proposes and merges
+    /// it. For the ambient light (`dark`: everything at 0, where a proposal from noise
+    /// means nothing), and for a light whose metering frame stays dark at the longest
+    /// exposure, the bracket is the metered exposure and two and four stops below it, so
+    /// a light that adds nothing is merged exactly as the ambient was and compares with it
+    /// on noise alone.
+    fn shoot_look(&mut self, look: &Look, dark: bool) -> Result<visobjd_hdr::Merged, CaptureError> {
         self.show(look)?;
         let response = self.record.response.clone();
-        let meter = self.meter(response.as_ref())?;
-        let mut times = visobjd_hdr::propose_bracket(
-            &meter.frame(),
-            response.as_ref(),
-            &self.choices(),
-            &BracketSettings::default(),
-        )?
-        .times;
-        if let Some(max) = longest {
-            times.retain(|&t| t <= max);
-        }
+        let (meter, t) = self.meter()?;
+        let mut times = if dark || meter.high() < METERED {
+            [t / 16.0, t / 4.0, t]
+                .map(|x| self.nearest(x).seconds())
+                .to_vec()
+        } else {
+            let mut times = visobjd_hdr::propose_bracket(
+                &meter.frame(),
+                response.as_ref(),
+                &self.choices(),
+                &BracketSettings::default(),
+            )?
+            .times;
+            times.retain(|&x| x <= LONGEST);
+            times
+        };
         if times.is_empty() {
-            times.push(self.nearest(longest.unwrap_or(1.0)).seconds());
+            times.push(t);
         }
+        times.dedup();
         self.progress
             .step(&format!("bracket of {} frames", times.len()));
         let mut shots = Vec::with_capacity(times.len());
         for t in times {
             shots.push(self.shoot(&self.nearest(t))?);
         }
+        tracing::debug!(
+            "bracket: {:?}",
+            shots
+                .iter()
+                .map(|s| (s.exposure.seconds, s.high()))
+                .collect::<Vec<_>>()
+        );
         let frames: Vec<_> = shots.iter().map(decode::Shot::frame).collect();
         let settings = MergeSettings {
             width: Some(self.opts.width),
@@ -525,12 +568,17 @@ impl Session<'_> {
     /// their basis images: the median relative error over the pixels the look lights.
     fn validate(&mut self, ambient: &Radiance) -> Result<Option<f64>, CaptureError> {
         let captured: Vec<usize> = (0..self.scene.lights.len())
-            .filter(|&l| self.record.lights.contains_key(&self.scene.lights[l].channel))
+            .filter(|&l| {
+                self.record
+                    .lights
+                    .contains_key(&self.scene.lights[l].channel)
+            })
             .collect();
         if captured.is_empty() {
             return Ok(None);
         }
-        self.progress.step("validation: a random look of several lights");
+        self.progress
+            .step("validation: a random look of several lights");
         let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(self.opts.seed ^ 0x5eed);
         let mut look = Look::off(self.scene.lights.len());
         let mut composite: Option<Radiance> = None;
@@ -568,17 +616,43 @@ impl Session<'_> {
         let Some(composite) = composite else {
             return Ok(None);
         };
-        let shot = self.shoot_look(&look, None)?.radiance;
+        let shot = self.shoot_look(&look, false)?.radiance;
         let shot = visobjd_hdr::subtract_ambient(&shot, ambient)?;
         Ok(relative_error(&shot, &composite))
     }
 }
+
+/// The longest exposure capture uses, in seconds: long enough for a dim light at a
+/// stopped-down aperture, short enough that a light takes seconds, not minutes.
+const LONGEST: f64 = 8.0;
+
+/// A metering frame is good when its brightest pixels reach this fraction of full scale.
+const METERED: f64 = 0.3;
 
 /// Every light at full white: how capture asks a light for its basis.
 const WHITE: Level = Level {
     intensity: 1.0,
     color: [1.0; 3],
 };
+
+/// How many samples of `light - ambient` exceed one and a half times the largest
+/// difference between two merges of the ambient light (`ambient`, `again`): an empirical
+/// noise level that holds whatever the noise looks like (JPEG's near-black codes are
+/// quantised and blocky, where a local estimate from the pixels is fooled).
+fn above_null(light: &Radiance, ambient: &Radiance, again: &Radiance) -> usize {
+    let null = ambient
+        .pixels
+        .iter()
+        .zip(&again.pixels)
+        .flat_map(|(a, b)| (0..3).map(move |c| (a[c] - b[c]).abs()))
+        .fold(0.0f32, f32::max);
+    light
+        .pixels
+        .iter()
+        .zip(&ambient.pixels)
+        .filter(|(l, a)| (0..3).any(|c| l[c] - a[c] > 1.5 * null))
+        .count()
+}
 
 /// Median relative error of `got` against `want` over the pixels `want` lights (above 5%
 /// of its brightest luminance).

@@ -15,7 +15,9 @@ use std::time::{Duration, Instant};
 use rand::SeedableRng;
 use rand::rngs::Xoshiro256PlusPlus;
 use rand_distr::{Distribution, Normal};
-use visobjd_camera::{Camera, Description, Error, ExposureSource, Frame, Setting, Settings, Shutter};
+use visobjd_camera::{
+    Camera, Description, Error, ExposureSource, Frame, Setting, Settings, Shutter,
+};
 use visobjd_dmx::Patch;
 use visobjd_dmx::patch::SLOTS;
 use visobjd_scene::Scene;
@@ -39,10 +41,10 @@ const SENSOR_WIDTH: usize = 1920;
 /// Shutter choices, 1/4000 s to 30 s in third stops, as a camera lists them.
 const SHUTTERS: &[&str] = &[
     "1/4000", "1/3200", "1/2500", "1/2000", "1/1600", "1/1250", "1/1000", "1/800", "1/640",
-    "1/500", "1/400", "1/320", "1/250", "1/200", "1/160", "1/125", "1/100", "1/80", "1/60",
-    "1/50", "1/40", "1/30", "1/25", "1/20", "1/15", "1/13", "1/10", "1/8", "1/6", "1/5",
-    "1/4", "0.3", "0.4", "0.5", "0.6", "0.8", "1", "1.3", "1.6", "2", "2.5", "3.2", "4", "5",
-    "6", "8", "10", "13", "15", "20", "25", "30",
+    "1/500", "1/400", "1/320", "1/250", "1/200", "1/160", "1/125", "1/100", "1/80", "1/60", "1/50",
+    "1/40", "1/30", "1/25", "1/20", "1/15", "1/13", "1/10", "1/8", "1/6", "1/5", "1/4", "0.3",
+    "0.4", "0.5", "0.6", "0.8", "1", "1.3", "1.6", "2", "2.5", "3.2", "4", "5", "6", "8", "10",
+    "13", "15", "20", "25", "30",
 ];
 
 /// The simulated camera.
@@ -61,16 +63,34 @@ pub struct SimCamera {
 }
 
 impl SimCamera {
-    /// A camera that photographs `scene`'s basis images (read now, before a capture
-    /// replaces them) lit by the DMX it receives on a fresh loopback port
-    /// ([`SimCamera::listens_on`]).
-    pub fn new(scene: &Scene, format: Format, seed: u64) -> Result<SimCamera, String> {
+    /// A camera that photographs `scene`'s basis images lit by the DMX it receives on a
+    /// fresh loopback port ([`SimCamera::listens_on`]). It photographs a copy of them made
+    /// in `scene_dir/capture/sim/` on its first run, so a capture that replaces them, and
+    /// a resumed one, see the same stage.
+    pub fn new(
+        scene: &Scene,
+        scene_dir: &Path,
+        format: Format,
+        seed: u64,
+    ) -> Result<SimCamera, String> {
         let socket = UdpSocket::bind("127.0.0.1:0")
             .map_err(|e| format!("the sim camera cannot listen on loopback: {e}"))?;
         let mut truth = Vec::with_capacity(scene.lights.len());
         let mut size = None;
-        for light in &scene.lights {
-            let img = visobjd_compositor::basis::read_exr(&light.basis).map_err(|e| {
+        let stage = scene_dir.join("capture").join("sim");
+        std::fs::create_dir_all(&stage)
+            .map_err(|e| format!("{}: cannot make it: {e}", stage.display()))?;
+        for (i, light) in scene.lights.iter().enumerate() {
+            let copy = stage.join(format!("{i:04}.exr"));
+            if !copy.is_file() {
+                std::fs::copy(&light.basis, &copy).map_err(|e| {
+                    format!(
+                        "the sim camera photographs the scene's own basis images (render them with `visobjd synth`): {}: {e}",
+                        light.basis.display()
+                    )
+                })?;
+            }
+            let img = visobjd_compositor::basis::read_exr(&copy).map_err(|e| {
                 format!(
                     "the sim camera photographs the scene's own basis images (render them with `visobjd synth`): {e}"
                 )
@@ -130,10 +150,8 @@ impl SimCamera {
             self.socket
                 .set_read_timeout(Some(wait))
                 .map_err(|source| io("sim", source))?;
-            let n = match self.socket.recv(&mut buf) {
-                Ok(n) => n,
-                Err(_) if got => break,
-                Err(_) => break,
+            let Ok(n) = self.socket.recv(&mut buf) else {
+                break;
             };
             got = true;
             self.take(&buf[..n]);
@@ -174,6 +192,11 @@ impl SimCamera {
     /// The sensor's reading, 0..1 of full scale, before clipping.
     fn expose(&mut self, seconds: f64) -> Vec<[f32; 3]> {
         let m = self.patch.multipliers(&self.dmx);
+        tracing::debug!(
+            "sim: {} lights lit, dmx[0][..8] {:?}",
+            m.iter().filter(|v| **v != [0.0; 3]).count(),
+            self.dmx.first().map(|d| &d[..8])
+        );
         let relative = (seconds * ISO / (F_NUMBER * F_NUMBER)) as f32;
         let mut out = vec![[0.0f32; 3]; self.width * self.height];
         for (light, basis) in m.iter().zip(&self.truth) {
@@ -246,10 +269,21 @@ fn exif_fields(seconds: f64) -> Vec<exif::Field> {
 }
 
 /// A JPEG with an EXIF APP1 segment right after its SOI.
-fn write_jpeg(path: &Path, width: usize, height: usize, rgb: &[u8], seconds: f64) -> Result<(), Error> {
+fn write_jpeg(
+    path: &Path,
+    width: usize,
+    height: usize,
+    rgb: &[u8],
+    seconds: f64,
+) -> Result<(), Error> {
     let mut jpeg = Vec::new();
     image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpeg, 95)
-        .encode(rgb, width as u32, height as u32, image::ExtendedColorType::Rgb8)
+        .encode(
+            rgb,
+            width as u32,
+            height as u32,
+            image::ExtendedColorType::Rgb8,
+        )
         .map_err(|e| io("sim jpeg", std::io::Error::other(e)))?;
     let fields = exif_fields(seconds);
     let mut writer = exif::experimental::Writer::new();
@@ -274,7 +308,13 @@ fn write_jpeg(path: &Path, width: usize, height: usize, rgb: &[u8], seconds: f64
 }
 
 /// A 16-bit linear RGB TIFF with its exposure, black and white levels as tags.
-fn write_raw(path: &Path, width: usize, height: usize, values: &[u16], seconds: f64) -> Result<(), Error> {
+fn write_raw(
+    path: &Path,
+    width: usize,
+    height: usize,
+    values: &[u16],
+    seconds: f64,
+) -> Result<(), Error> {
     use tiff::encoder::{TiffEncoder, colortype};
     use tiff::tags::Tag;
     let fail = |e: tiff::TiffError| io("sim raw", std::io::Error::other(e.to_string()));
@@ -297,9 +337,12 @@ fn write_raw(path: &Path, width: usize, height: usize, values: &[u16], seconds: 
         },
     )
     .map_err(fail)?; // FNumber
-    dir.write_tag(Tag::Unknown(0x8827), ISO as u16).map_err(fail)?; // ISOSpeedRatings
-    dir.write_tag(Tag::Unknown(crate::decode::BLACK_LEVEL), RAW_BLACK).map_err(fail)?;
-    dir.write_tag(Tag::Unknown(crate::decode::WHITE_LEVEL), RAW_WHITE).map_err(fail)?;
+    dir.write_tag(Tag::Unknown(0x8827), ISO as u16)
+        .map_err(fail)?; // ISOSpeedRatings
+    dir.write_tag(Tag::Unknown(crate::decode::BLACK_LEVEL), RAW_BLACK)
+        .map_err(fail)?;
+    dir.write_tag(Tag::Unknown(crate::decode::WHITE_LEVEL), RAW_WHITE)
+        .map_err(fail)?;
     image.write_data(values).map_err(fail)
 }
 

@@ -96,11 +96,12 @@ const WINDOW: usize = 7;
 /// Tests whether `light` (merged with the light at full, ambient included) shows light
 /// over `ambient` (merged with the light off, same settings).
 ///
-/// The noise of `light - ambient` is measured from the data, locally (noise depends on
-/// brightness and on which frames of the bracket saw a pixel): the mean absolute
-/// horizontal neighbour difference in a 15x15 window, where a smooth light field cancels
-/// and independent noise of deviation sigma gives 2 sigma / sqrt(pi); an edge in the window
-/// only raises the estimate (fewer lit pixels, never more). A pixel is lit when any channel
+/// The noise of `light - ambient` is measured from the data, robustly: the median absolute
+/// deviation of the differences (times 1.4826, a Gaussian's sigma) in a 15x15 window
+/// (every other pixel), and no less than the same measure over the whole image, so that
+/// noise which is flat within a window but offset from block to block (JPEG near black)
+/// counts as noise; a light's own gradient only raises the estimate (fewer lit pixels,
+/// never more). A pixel is lit when any channel
 /// exceeds [`LIT_SIGMAS`] of its local noise; the light shows light when the lit pixels
 /// reach [`MIN_LIT_FRACTION`] of the image.
 pub fn light_test(light: &Radiance, ambient: &Radiance) -> Result<LightTest, HdrError> {
@@ -122,41 +123,31 @@ pub fn light_test(light: &Radiance, ambient: &Radiance) -> Result<LightTest, Hdr
         .map(|&v| f64::from(v))
         .sum::<f64>()
         / (2 * 3 * n).max(1) as f64;
-    // |neighbour difference| per sample, summed in an integral image per channel.
-    let mut integral = vec![[0.0f64; 3]; (w + 1) * (h + 1)];
-    for y in 0..h {
-        for x in 0..w {
-            let i = y * w + x;
-            let j = if x + 1 < w {
-                i + 1
-            } else {
-                i.saturating_sub(1)
-            };
-            for c in 0..3 {
-                let d = f64::from((diff[i][c] - diff[j][c]).abs());
-                integral[(y + 1) * (w + 1) + x + 1][c] =
-                    d + integral[y * (w + 1) + x + 1][c] + integral[(y + 1) * (w + 1) + x][c]
-                        - integral[y * (w + 1) + x][c];
-            }
-        }
-    }
-    // A floor so an all-black area (exact zeros) does not call every speck lit.
+    // A floor so an all-black area (exact zeros) does not call every speck lit, and the
+    // whole image's spread, so noise that is flat inside a window but differs from block
+    // to block (JPEG) is not taken for light.
     let floor = (1e-4 * mean).max(f64::MIN_POSITIVE);
+    let global: [f64; 3] = std::array::from_fn(|c| {
+        let mut all: Vec<f32> = diff.iter().step_by(7).map(|p| p[c]).collect();
+        spread(&mut all)
+    });
     let (mut lit, mut peak) = (0usize, 0.0f64);
+    let mut window = Vec::with_capacity((WINDOW + 1) * (WINDOW + 1));
     for y in 0..h {
         let (y0, y1) = (y.saturating_sub(WINDOW), (y + WINDOW + 1).min(h));
         for x in 0..w {
             let (x0, x1) = (x.saturating_sub(WINDOW), (x + WINDOW + 1).min(w));
-            let count = ((y1 - y0) * (x1 - x0)) as f64;
             let p = diff[y * w + x];
             let mut snr = f64::MIN;
             for c in 0..3 {
-                let s = integral[y1 * (w + 1) + x1][c]
-                    - integral[y0 * (w + 1) + x1][c]
-                    - integral[y1 * (w + 1) + x0][c]
-                    + integral[y0 * (w + 1) + x0][c];
-                // E|d| = 2 sigma / sqrt(pi) for d ~ N(0, 2 sigma^2).
-                let sigma = (s / count * std::f64::consts::PI.sqrt() / 2.0).max(floor);
+                window.clear();
+                window.extend(
+                    (y0..y1)
+                        .step_by(2)
+                        .flat_map(|yy| (x0..x1).step_by(2).map(move |xx| yy * w + xx))
+                        .map(|i| diff[i][c]),
+                );
+                let sigma = spread(&mut window).max(global[c]).max(floor);
                 snr = snr.max(f64::from(p[c]) / sigma);
             }
             peak = peak.max(snr);
@@ -171,4 +162,18 @@ pub fn light_test(light: &Radiance, ambient: &Radiance) -> Result<LightTest, Hdr
         min_lit_pixels,
         peak_snr: peak,
     })
+}
+
+/// The robust spread (1.4826 x the median absolute deviation: a Gaussian's sigma) of
+/// `values`, reordered in place.
+fn spread(values: &mut [f32]) -> f64 {
+    if values.is_empty() {
+        return 0.0;
+    }
+    let mid = values.len() / 2;
+    let median = *values.select_nth_unstable_by(mid, f32::total_cmp).1;
+    for v in values.iter_mut() {
+        *v = (*v - median).abs();
+    }
+    f64::from(*values.select_nth_unstable_by(mid, f32::total_cmp).1) * 1.4826
 }

@@ -40,9 +40,13 @@ fn jpeg_shot(map: &[[f32; 3]], seed: u64) -> Shot<u8> {
 }
 
 fn raw_frames(s: &Shot<u16>) -> Vec<Frame<'_>> {
-    s.data
-        .iter()
-        .zip(&s.exif)
+    raw_frames_of(&s.data, &s.exif)
+}
+
+/// Raw frames of `data` with EXIF times `times`.
+fn raw_frames_of<'a>(data: &'a [Vec<u16>], times: &[f64]) -> Vec<Frame<'a>> {
+    data.iter()
+        .zip(times)
         .map(|(d, &t)| Frame {
             width: W,
             height: H,
@@ -390,20 +394,7 @@ fn bracket_choice_covers_the_range() {
         .enumerate()
         .map(|(k, &t)| raw_frame(&map, W, t, 30 + k as u64))
         .collect();
-    let frames: Vec<Frame<'_>> = data
-        .iter()
-        .zip(&b.times)
-        .map(|(d, &t)| Frame {
-            width: W,
-            height: H,
-            exposure: exif(t),
-            pixels: Pixels::Raw {
-                values: d,
-                black: BLACK,
-                white: WHITE,
-            },
-        })
-        .collect();
+    let frames = raw_frames_of(&data, &b.times);
     let m = merge(&frames, None, &full_res()).unwrap();
     assert_eq!(m.clipped_everywhere, 0);
     // Clipped meter: flagged, starts at the shortest choice.
