@@ -219,7 +219,18 @@ pub fn capture(
     let description = camera.describe()?;
     let settings = camera.settings()?;
     if let Some(f) = &settings.image_format {
-        camera.set_config(&f.key, opts.format.name())?;
+        // Bodies name their formats their own way (`Large Fine JPEG`, `RAW`, `RAW + JPEG`):
+        // JPEG alone, or RAW alone; keep the current one when none fits.
+        let fits = |c: &&String| {
+            let c = c.to_uppercase();
+            match opts.format {
+                Format::Jpeg => c.contains("JPEG") && !c.contains("RAW"),
+                Format::Raw => c.contains("RAW") && !c.contains("JPEG"),
+            }
+        };
+        if let Some(choice) = f.choices.iter().find(fits) {
+            camera.set_config(&f.key, choice)?;
+        }
     }
     let number = |s: Option<&visobjd_camera::Setting>, default: f64| {
         s.and_then(|s| s.current.trim_start_matches("f/").parse::<f64>().ok())
