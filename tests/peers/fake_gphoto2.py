@@ -19,9 +19,26 @@ Environment:
   FAKE_GPHOTO2_APERTURE_KEY  `f-number` for a body that names it so (values `f/8`)
   FAKE_GPHOTO2_REFUSE    KEY=VALUE[,KEY=VALUE]: listed among the choices, refused by set
   FAKE_GPHOTO2_HANG_CAPTURE  N[,M]: the Nth capture (from 1) sleeps FAKE_GPHOTO2_HANG_S
-                         seconds (default 3600) instead of answering
+                         seconds (default 3600) instead of answering; an entry `lit:K`
+                         (with a rig) hangs every capture whose DMX lights rig light K
+                         (from 1) alone, so a retry, seeing the same DMX, hangs too
   FAKE_GPHOTO2_FAIL_CALL N[,M] or `all`: the Nth call (from 1) fails with -53
   FAKE_GPHOTO2_NO_CAMERA 1: no camera is connected
+  FAKE_GPHOTO2_SACN_PORT with FAKE_GPHOTO2_RIG: render from the DMX on the wire. Each
+                         capture binds 127.0.0.1:PORT, collects E1.31 data packets until it
+                         has one of every universe the rig uses (at most ~1 s), takes each
+                         light's level from its slots (rig_levels) and renders
+                         sum(level x basis) instead of FAKE_GPHOTO2_SCENE
+  FAKE_GPHOTO2_RIG       JSON list of lights: {"universe", "address", "footprint",
+                         "basis", optional "intensity"} with basis a .npy float32 HxWx3
+                         linear image (a relative path is taken from the JSON file's
+                         folder) and intensity the offset of an intensity slot in the
+                         footprint (an irgb fixture: 0)
+  FAKE_GPHOTO2_ZOOM      N: every rig pixel becomes NxN sensor pixels (default 1)
+  FAKE_GPHOTO2_SEED      seed of the rig render's noise (default 1; each capture adds its
+                         number), shot noise of 20,000 electrons at full scale
+  FAKE_GPHOTO2_DMX_LOG   a file to which each rig render appends a JSON line: capture
+                         number, each universe's 512 slots as hex, each light's level
 
 Each frame is rendered (render_frame) from the scene scaled by the exposure through a
 simple camera response with clipping, and written as a JPEG whose EXIF holds the
@@ -92,7 +109,7 @@ def numbers(name):
     text = os.environ.get(name, "").strip()
     if text == "all":
         return "all"
-    return {int(n) for n in text.split(",") if n.strip()}
+    return {int(n) for n in text.split(",") if n.strip() and ":" not in n}
 
 
 def hit(spec, n):
@@ -135,16 +152,108 @@ def default_scene():
     return scene
 
 
-def render_frame(radiance, exposure_s, iso, f_number):
+def render_frame(radiance, exposure_s, iso, f_number, noise=None):
     """A frame as the camera would record it: linear radiance times the exposure
-    (time, ISO, aperture), through a gamma response, clipped to 8 bits. Kept apart from
-    the option handling so a later step can feed it radiance rendered from DMX."""
+    (time, ISO, aperture), through a gamma response, clipped to 8 bits; with `noise` (a
+    numpy Generator), shot and read noise before the response."""
     import numpy as np
     # 1.0 radiance at 1/64 s, ISO 100, f/8 lands at 18% grey.
     gain = 0.18 * 64.0 * 64.0
     signal = radiance * (exposure_s * (iso / 100.0) / (f_number * f_number) * gain)
+    if noise is not None:
+        # Shot noise (20,000 electrons at full scale) and a little read noise.
+        electrons = 20000.0
+        sigma = np.sqrt(np.clip(signal, 0.0, 1.0) / electrons + (2.0 / electrons) ** 2)
+        signal = signal + noise.standard_normal(signal.shape).astype(np.float32) * sigma
     encoded = np.clip(signal, 0.0, 1.0) ** (1.0 / 2.2)
     return np.round(encoded * 255.0).astype(np.uint8)
+
+
+def parse_sacn(p):
+    """(universe, 512 slots) of an E1.31 data packet carrying DMX, from the standard's
+    octets (E1.31-2018 Table 4-1); None for anything else, for a stream being terminated
+    (Options bit 6) and for a non-zero start code."""
+    if len(p) < 126 or p[4:16] != b"ASC-E1.17\0\0\0":
+        return None
+    if p[18:22] != b"\0\0\0\x04" or p[40:44] != b"\0\0\0\x02" or p[117] != 0x02:
+        return None  # root VECTOR_ROOT_E131_DATA, framing VECTOR_E131_DATA_PACKET, DMP set
+    if p[112] & 0x40:
+        return None  # Stream_Terminated
+    universe = (p[113] << 8) | p[114]
+    count = (p[123] << 8) | p[124]  # property values, the start code first
+    values = p[125:125 + count]
+    if count < 1 or len(values) < count or values[0] != 0:
+        return None
+    dmx = bytearray(512)
+    dmx[:count - 1] = values[1:513]
+    return universe, bytes(dmx)
+
+
+def receive_dmx(port, universes, wait_s=1.0):
+    """The latest DMX of each universe seen on 127.0.0.1:port within `wait_s`, returning as
+    soon as every universe in `universes` has a packet."""
+    import socket
+    got = {}
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    sock.bind(("127.0.0.1", port))
+    deadline = time.monotonic() + wait_s
+    try:
+        while not universes <= got.keys():
+            left = deadline - time.monotonic()
+            if left <= 0:
+                break
+            sock.settimeout(left)
+            try:
+                packet = sock.recv(2048)
+            except socket.timeout:
+                break
+            parsed = parse_sacn(packet)
+            if parsed:
+                got[parsed[0]] = parsed[1]
+    finally:
+        sock.close()
+    return got
+
+
+def load_rig(path):
+    with open(path, encoding="utf-8") as f:
+        rig = json.load(f)
+    base = os.path.dirname(os.path.abspath(path))
+    for light in rig:
+        light["basis"] = os.path.join(base, light["basis"])
+    return rig
+
+
+def rig_levels(rig, dmx):
+    """Each light's level: the max of its slots / 255, or, for a light with an intensity
+    slot, that slot / 255 times the max of its other slots / 255 (1 when it has none): a
+    fixture at intensity 0 is dark whatever colour it holds. 0 when its universe was not
+    seen."""
+    levels = []
+    for light in rig:
+        slots = dmx.get(light["universe"], bytes(512))
+        start = light["address"] - 1
+        slots = list(slots[start:start + light["footprint"]])
+        i = light.get("intensity")
+        if i is None:
+            levels.append(max(slots, default=0) / 255.0)
+        else:
+            others = slots[:i] + slots[i + 1:]
+            levels.append(slots[i] / 255.0 * (max(others) / 255.0 if others else 1.0))
+    return levels
+
+
+def rig_radiance(rig, levels):
+    import numpy as np
+    total = None
+    for light, level in zip(rig, levels):
+        basis = np.load(light["basis"]).astype(np.float32)
+        total = basis * level if total is None else total + basis * level
+    zoom = int(os.environ.get("FAKE_GPHOTO2_ZOOM", "1"))
+    if zoom > 1:
+        total = np.repeat(np.repeat(total, zoom, axis=0), zoom, axis=1)
+    return total
 
 
 def exif_bytes(state, exposure, iso, f_number):
@@ -178,6 +287,43 @@ def expand(pattern, suffix, stem, number):
     return "".join(out)
 
 
+def rig_frame(state):
+    """With FAKE_GPHOTO2_SACN_PORT and FAKE_GPHOTO2_RIG: (radiance from the DMX on the wire,
+    the rig's light levels); else None."""
+    port = os.environ.get("FAKE_GPHOTO2_SACN_PORT")
+    rig_path = os.environ.get("FAKE_GPHOTO2_RIG")
+    if not (port and rig_path):
+        return None
+    rig = load_rig(rig_path)
+    dmx = receive_dmx(int(port), {light["universe"] for light in rig})
+    levels = rig_levels(rig, dmx)
+    log = os.environ.get("FAKE_GPHOTO2_DMX_LOG")
+    if log:
+        with open(log, "a", encoding="utf-8") as f:
+            f.write(json.dumps({
+                "capture": state["captures"],
+                "universes": {str(u): d.hex() for u, d in sorted(dmx.items())},
+                "levels": levels,
+            }) + "\n")
+    return rig_radiance(rig, levels), levels
+
+
+def hangs_when_lit(levels):
+    """Whether FAKE_GPHOTO2_HANG_CAPTURE has `lit:K` and rig light K alone is lit."""
+    for entry in os.environ.get("FAKE_GPHOTO2_HANG_CAPTURE", "").split(","):
+        entry = entry.strip()
+        if entry.startswith("lit:"):
+            k = int(entry[4:]) - 1
+            if levels[k] > 0 and all(v == 0 for i, v in enumerate(levels) if i != k):
+                return True
+    return False
+
+
+def hang():
+    sys.stdout.flush()
+    time.sleep(float(os.environ.get("FAKE_GPHOTO2_HANG_S", "3600")))
+
+
 def capture(state, filename, force):
     from PIL import Image
     import numpy as np
@@ -192,9 +338,18 @@ def capture(state, filename, force):
     aperture = config.get("aperture") or config.get("f-number")
     f_number = float(aperture["current"].replace("f/", ""))
 
-    scene_path = os.environ.get("FAKE_GPHOTO2_SCENE")
-    radiance = np.load(scene_path).astype(np.float32) if scene_path else default_scene()
-    pixels = render_frame(radiance, float(exposure), iso, f_number)
+    from_rig = rig_frame(state)
+    if from_rig:
+        radiance, levels = from_rig
+        if hangs_when_lit(levels):
+            hang()
+        seed = int(os.environ.get("FAKE_GPHOTO2_SEED", "1")) + state["captures"]
+        noise = np.random.default_rng(seed)
+        pixels = render_frame(radiance, float(exposure), iso, f_number, noise)
+    else:
+        scene_path = os.environ.get("FAKE_GPHOTO2_SCENE")
+        radiance = np.load(scene_path).astype(np.float32) if scene_path else default_scene()
+        pixels = render_frame(radiance, float(exposure), iso, f_number)
     image = Image.fromarray(pixels, "RGB")
     exif = exif_bytes(state, exposure, iso, f_number)
 
@@ -308,8 +463,7 @@ def main(argv):
             state["captures"] += 1
             save_state(state_path, state)
             if hit(numbers("FAKE_GPHOTO2_HANG_CAPTURE"), state["captures"]):
-                sys.stdout.flush()
-                time.sleep(float(os.environ.get("FAKE_GPHOTO2_HANG_S", "3600")))
+                hang()
             capture(state, filename, force)
             save_state(state_path, state)
     return 0
