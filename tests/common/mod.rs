@@ -1,6 +1,7 @@
 //! Builders for small synthetic scenes and reference images that tests write themselves.
 #![allow(dead_code)]
 
+pub mod capture;
 pub mod daemon;
 pub mod tools;
 pub mod wire;
