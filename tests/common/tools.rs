@@ -26,3 +26,20 @@ pub fn python_osc() -> bool {
         .output()
         .is_ok_and(|o| o.status.success())
 }
+
+/// Whether python3 with Pillow, piexif and numpy (what `tests/peers/fake_gphoto2.py`
+/// needs) is here; if not, [`missing`] has said so (and failed the test under CI).
+pub fn fake_gphoto2() -> bool {
+    let ready = Command::new("python3")
+        .args(["-c", "import PIL, piexif, numpy"])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !ready {
+        missing(
+            "python3 with Pillow, piexif and numpy (the fake gphoto2)",
+            "is not installed",
+            "python3 -m pip install pillow piexif numpy",
+        );
+    }
+    ready
+}
