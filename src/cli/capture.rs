@@ -180,6 +180,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(d) = summary.ambient_drift {
         println!("ambient drift between start and end: {:.1}%", d * 100.0);
     }
+    if let Some(o) = summary.overhead_per_light {
+        println!(
+            "capture's own time per light (camera and settling aside): {:.2} s",
+            o
+        );
+    }
     if let Some(v) = summary.validation {
         println!(
             "validation: a random look shot and composited from the basis differ by {:.1}% (median over the lit pixels)",

@@ -120,6 +120,10 @@ pub struct Summary {
     pub ambient_drift: Option<f64>,
     /// Median relative error of the validation shot against the composite.
     pub validation: Option<f64>,
+    /// Seconds per light written that capture itself took: the light's time less the
+    /// camera's calls and the wait for the lamps and the DMX (decoding, merging,
+    /// writing, metering decisions).
+    pub overhead_per_light: Option<f64>,
 }
 
 /// `capture.json`: what a resumed capture needs, and what a person wants to know later.
@@ -202,6 +206,9 @@ struct Session<'a> {
     f_number: f64,
     record: Record,
     shots: u64,
+    /// Time spent in the camera's calls and waiting for the rig, so far: what capture's
+    /// own overhead is measured without.
+    waited: Duration,
 }
 
 /// Captures the scene's basis images (see the crate's documentation). `output` must be
@@ -260,6 +267,7 @@ pub fn capture(
         camera,
         record,
         shots: 0,
+        waited: Duration::ZERO,
     };
     if s.shutters.is_empty() {
         return Err(CaptureError::Files(
@@ -278,6 +286,7 @@ impl Session<'_> {
             })
             .collect();
         let mut summary = Summary::default();
+        let mut own = Duration::ZERO;
         self.progress.begin(todo.len());
         if self.opts.format == Format::Jpeg && self.record.response.is_none() {
             self.progress
@@ -308,6 +317,7 @@ impl Session<'_> {
                 return Err(CaptureError::Stopped);
             }
             self.progress.step(&format!("light {ch} ({name})"));
+            let (started, waited) = (Instant::now(), self.waited);
             let mut look = Look::off(self.scene.lights.len());
             look.levels[l] = WHITE;
             let merged = self.shoot_look(&look, false)?;
@@ -360,6 +370,7 @@ impl Session<'_> {
             );
             save_record(self.scene_dir, &self.record)?;
             summary.captured.push(ch);
+            own += started.elapsed().saturating_sub(self.waited - waited);
             self.progress.light_done();
         }
         self.progress.step("ambient light again: everything at 0");
@@ -375,6 +386,8 @@ impl Session<'_> {
         }
         summary.ambient_drift = Some(drift.relative);
         self.record.ambient_drift = summary.ambient_drift;
+        summary.overhead_per_light = (!summary.captured.is_empty())
+            .then(|| own.as_secs_f64() / summary.captured.len() as f64);
         summary.validation = self.validate(&ambient)?;
         self.record.validation = summary.validation;
         save_record(self.scene_dir, &self.record)?;
@@ -402,6 +415,7 @@ impl Session<'_> {
 
     /// Puts `look` on the rig and waits for the lamps and for frames that carry it.
     fn show(&mut self, look: &Look) -> Result<(), CaptureError> {
+        let started = Instant::now();
         self.output.set_look(look.clone(), 0.0);
         let ticks = self.output.stats().ticks;
         std::thread::sleep(self.opts.settle);
@@ -414,6 +428,7 @@ impl Session<'_> {
             }
             std::thread::sleep(Duration::from_millis(5));
         }
+        self.waited += started.elapsed();
         Ok(())
     }
 
@@ -424,7 +439,10 @@ impl Session<'_> {
         }
         self.shots += 1;
         let out = work_dir(self.scene_dir).join(format!("shot-{}", self.shots));
-        let frame = self.camera.capture(shutter, &out)?;
+        let started = Instant::now();
+        let frame = self.camera.capture(shutter, &out);
+        self.waited += started.elapsed();
+        let frame = frame?;
         let path = frame
             .paths
             .iter()
