@@ -1,7 +1,10 @@
 //! The command template camera: shell-free argv from a template, the exposure from the
 //! written file's EXIF when it has one, else the request (and the frame says so).
 
-mod fake;
+/// The project's rule for a missing tool, and the fake gphoto2's readiness check.
+#[allow(dead_code)]
+#[path = "../../../tests/common/tools.rs"]
+mod tools;
 
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};
@@ -42,7 +45,7 @@ fn a_file_without_exif_gives_the_requested_exposure_marked_assumed() {
 
 #[test]
 fn a_file_with_exif_gives_its_exposure_not_the_request() {
-    if !fake::ready() {
+    if !tools::fake_gphoto2() {
         return;
     }
     let dir = folder("exif");

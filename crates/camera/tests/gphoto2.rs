@@ -3,7 +3,10 @@
 //! tool would be. The fake keeps its state in a JSON file and logs each call's argv, so a
 //! test can tell how many processes ran.
 
-mod fake;
+/// The project's rule for a missing tool, and the fake gphoto2's readiness check.
+#[allow(dead_code)]
+#[path = "../../../tests/common/tools.rs"]
+mod tools;
 
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};
@@ -23,7 +26,7 @@ impl Rig {
     /// A fresh rig for test `name` with extra fake settings `env`; `None` (after a note,
     /// or a failure under CI) when python3 with Pillow, piexif and numpy is missing.
     fn new(name: &str, env: &[(&str, &str)]) -> Option<Rig> {
-        if !fake::ready() {
+        if !tools::fake_gphoto2() {
             return None;
         }
         let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))

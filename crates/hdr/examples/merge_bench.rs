@@ -48,30 +48,8 @@ fn main() {
         .collect();
     drop(map);
     let settings = MergeSettings::default();
-    let raw_frames: Vec<Frame<'_>> = raw
-        .iter()
-        .zip(&exif_t)
-        .map(|(d, &t)| Frame {
-            width: W,
-            height: H,
-            exposure: exif(t),
-            pixels: Pixels::Raw {
-                values: d,
-                black: BLACK,
-                white: WHITE,
-            },
-        })
-        .collect();
-    let jpeg_frames: Vec<Frame<'_>> = jpeg
-        .iter()
-        .zip(&exif_t)
-        .map(|(d, &t)| Frame {
-            width: W,
-            height: H,
-            exposure: exif(t),
-            pixels: Pixels::Jpeg(d),
-        })
-        .collect();
+    let raw_frames = raw_frames_of(&raw, &exif_t, W, H);
+    let jpeg_frames = jpeg_frames_of(&jpeg, &exif_t, W, H);
     let t = Instant::now();
     let mut rng = <Rng as rand::SeedableRng>::seed_from_u64(7);
     let recovered = Response::recover(&jpeg_frames, &mut rng).expect("response");

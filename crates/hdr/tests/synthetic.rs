@@ -40,37 +40,11 @@ fn jpeg_shot(map: &[[f32; 3]], seed: u64) -> Shot<u8> {
 }
 
 fn raw_frames(s: &Shot<u16>) -> Vec<Frame<'_>> {
-    raw_frames_of(&s.data, &s.exif)
-}
-
-/// Raw frames of `data` with EXIF times `times`.
-fn raw_frames_of<'a>(data: &'a [Vec<u16>], times: &[f64]) -> Vec<Frame<'a>> {
-    data.iter()
-        .zip(times)
-        .map(|(d, &t)| Frame {
-            width: W,
-            height: H,
-            exposure: exif(t),
-            pixels: Pixels::Raw {
-                values: d,
-                black: BLACK,
-                white: WHITE,
-            },
-        })
-        .collect()
+    raw_frames_of(&s.data, &s.exif, W, H)
 }
 
 fn jpeg_frames(s: &Shot<u8>) -> Vec<Frame<'_>> {
-    s.data
-        .iter()
-        .zip(&s.exif)
-        .map(|(d, &t)| Frame {
-            width: W,
-            height: H,
-            exposure: exif(t),
-            pixels: Pixels::Jpeg(d),
-        })
-        .collect()
+    jpeg_frames_of(&s.data, &s.exif, W, H)
 }
 
 fn full_res() -> MergeSettings {
@@ -394,7 +368,7 @@ fn bracket_choice_covers_the_range() {
         .enumerate()
         .map(|(k, &t)| raw_frame(&map, W, t, 30 + k as u64))
         .collect();
-    let frames = raw_frames_of(&data, &b.times);
+    let frames = raw_frames_of(&data, &b.times, W, H);
     let m = merge(&frames, None, &full_res()).unwrap();
     assert_eq!(m.clipped_everywhere, 0);
     // Clipped meter: flagged, starts at the shortest choice.

@@ -4,7 +4,7 @@
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
 use rayon::prelude::*;
-use visobjd_hdr::Exposure;
+use visobjd_hdr::{Exposure, Frame, Pixels};
 
 pub type Rng = rand::rngs::Xoshiro256PlusPlus;
 
@@ -137,4 +137,44 @@ pub fn bracket_times(n: usize, base: f64) -> (Vec<f64>, Vec<f64>) {
         })
         .collect();
     (truth, exif)
+}
+
+/// Raw frames (`w` x `h`) of `data` with EXIF times `times`.
+pub fn raw_frames_of<'a>(
+    data: &'a [Vec<u16>],
+    times: &[f64],
+    w: usize,
+    h: usize,
+) -> Vec<Frame<'a>> {
+    data.iter()
+        .zip(times)
+        .map(|(d, &t)| Frame {
+            width: w,
+            height: h,
+            exposure: exif(t),
+            pixels: Pixels::Raw {
+                values: d,
+                black: BLACK,
+                white: WHITE,
+            },
+        })
+        .collect()
+}
+
+/// JPEG frames (`w` x `h`) of `data` with EXIF times `times`.
+pub fn jpeg_frames_of<'a>(
+    data: &'a [Vec<u8>],
+    times: &[f64],
+    w: usize,
+    h: usize,
+) -> Vec<Frame<'a>> {
+    data.iter()
+        .zip(times)
+        .map(|(d, &t)| Frame {
+            width: w,
+            height: h,
+            exposure: exif(t),
+            pixels: Pixels::Jpeg(d),
+        })
+        .collect()
 }
