@@ -296,71 +296,72 @@ impl Engine {
         let engine = Arc::clone(self);
         let peer = peer.clone();
         let spawned = self.threads.spawn("generate", move || {
-                // Whatever happens below, the next generate is allowed.
-                let running = Running(&engine.generating);
-                engine.notify(&started_msgs);
-                let started = Instant::now();
-                let drawn = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                    if engine.panic_generate.swap(false, Ordering::SeqCst) {
-                        panic!("test hook: the generate panics");
-                    }
-                    engine.stage.generate(
-                        &GenerateRequest {
-                            objectives: &objectives,
-                            constraints: &constraints,
-                            base: &base,
-                            spread: engine.spread,
-                            count,
-                            clusters,
-                        },
-                        &mut rand::rngs::Xoshiro256PlusPlus::seed_from_u64(seed),
-                    )
-                }));
-                let Ok(generation) = drawn else {
-                    tracing::error!("generate {serial} (seed {seed}) failed: a panic, logged above");
-                    let e = error(
-                        "/vo/generate",
-                        &format!("the generate failed (an internal error, logged with seed {seed}); the gallery is unchanged, generate again"),
-                    );
-                    // Free before the answer: the requester may generate again at once.
-                    drop(running);
-                    peer.reply(std::slice::from_ref(&e));
-                    return;
-                };
-                let ms = started.elapsed().as_secs_f32() * 1000.0;
-                if generation.exhausted {
-                    tracing::warn!(
-                        "generate: only {} of {count} candidates after {} draws",
-                        generation.candidates.len(),
-                        generation.draws
-                    );
+            // Whatever happens below, the next generate is allowed.
+            let running = Running(&engine.generating);
+            engine.notify(&started_msgs);
+            let started = Instant::now();
+            let drawn = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                if engine.panic_generate.swap(false, Ordering::SeqCst) {
+                    panic!("test hook: the generate panics");
                 }
-                let reply = msg(
-                    "/vo/generated",
-                    vec![
-                        OscType::Int(generation.candidates.len() as i32),
-                        OscType::Int(generation.entries.len() as i32),
-                        OscType::Float(ms),
-                        OscType::Int(seed as i32),
-                    ],
+                engine.stage.generate(
+                    &GenerateRequest {
+                        objectives: &objectives,
+                        constraints: &constraints,
+                        base: &base,
+                        spread: engine.spread,
+                        count,
+                        clusters,
+                    },
+                    &mut rand::rngs::Xoshiro256PlusPlus::seed_from_u64(seed),
+                )
+            }));
+            let Ok(generation) = drawn else {
+                tracing::error!("generate {serial} (seed {seed}) failed: see the panic above");
+                let why = format!(
+                    "the generate failed (an internal error, logged with seed {seed}); \
+                         the gallery is unchanged, generate again"
                 );
-                let mut s = engine.session();
-                s.gallery = Some(Gallery {
-                    generation,
-                    seed,
-                    serial,
-                });
-                s.entry = None;
-                engine.generating.store(false, Ordering::SeqCst);
-                let mut pushes = vec![
-                    msg("/vo/progress", vec![OscType::Float(1.0)]),
-                    reply.clone(),
-                ];
-                pushes.extend(engine.feedback(&s));
-                drop(s);
-                peer.reply(std::slice::from_ref(&reply));
-                engine.notify(&pushes);
+                let e = error("/vo/generate", &why);
+                // Free before the answer: the requester may generate again at once.
+                drop(running);
+                peer.reply(std::slice::from_ref(&e));
+                return;
+            };
+            let ms = started.elapsed().as_secs_f32() * 1000.0;
+            if generation.exhausted {
+                tracing::warn!(
+                    "generate: only {} of {count} candidates after {} draws",
+                    generation.candidates.len(),
+                    generation.draws
+                );
+            }
+            let reply = msg(
+                "/vo/generated",
+                vec![
+                    OscType::Int(generation.candidates.len() as i32),
+                    OscType::Int(generation.entries.len() as i32),
+                    OscType::Float(ms),
+                    OscType::Int(seed as i32),
+                ],
+            );
+            let mut s = engine.session();
+            s.gallery = Some(Gallery {
+                generation,
+                seed,
+                serial,
             });
+            s.entry = None;
+            engine.generating.store(false, Ordering::SeqCst);
+            let mut pushes = vec![
+                msg("/vo/progress", vec![OscType::Float(1.0)]),
+                reply.clone(),
+            ];
+            pushes.extend(engine.feedback(&s));
+            drop(s);
+            peer.reply(std::slice::from_ref(&reply));
+            engine.notify(&pushes);
+        });
         if let Err(e) = spawned {
             self.generating.store(false, Ordering::SeqCst);
             return Err(format!("cannot start the generate: {e}"));

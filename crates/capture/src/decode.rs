@@ -41,26 +41,34 @@ impl Shot {
     /// The 99.9th percentile of the frame's samples as a fraction of full scale: how
     /// close its brightest pixels come to clipping.
     pub fn high(&self) -> f64 {
-        let mut v: Vec<f64> = match &self.pixels {
-            Pixels::Jpeg(p) => p.iter().map(|&c| f64::from(c) / 255.0).collect(),
+        // A histogram of the sample values, not a sorted copy: a 24-megapixel frame has
+        // 72 million samples.
+        let (counts, black, span) = match &self.pixels {
+            Pixels::Jpeg(p) => (histogram(p.iter().map(|&c| usize::from(c)), 256), 0, 255.0),
             Pixels::Raw {
                 values,
                 black,
                 white,
-            } => {
-                let span = f64::from(white - black);
-                values
-                    .iter()
-                    .map(|&x| f64::from(x.saturating_sub(*black)) / span)
-                    .collect()
-            }
+            } => (
+                histogram(values.iter().map(|&x| usize::from(x)), 65536),
+                usize::from(*black),
+                f64::from(white - black),
+            ),
         };
-        if v.is_empty() {
+        let total: usize = counts.iter().sum();
+        if total == 0 {
             return 0.0;
         }
-        let k = (v.len() - 1) * 999 / 1000;
-        v.select_nth_unstable_by(k, f64::total_cmp);
-        v[k]
+        let rank = (total - 1) * 999 / 1000;
+        let mut seen = 0;
+        let value = counts
+            .iter()
+            .position(|&n| {
+                seen += n;
+                seen > rank
+            })
+            .unwrap_or(0);
+        value.saturating_sub(black) as f64 / span
     }
 
     /// The shot as the merge takes it (borrowed, not copied).
@@ -83,6 +91,15 @@ impl Shot {
             },
         }
     }
+}
+
+/// How many of `values` (each below `bins`) fall on each value.
+fn histogram(values: impl Iterator<Item = usize>, bins: usize) -> Vec<usize> {
+    let mut counts = vec![0usize; bins];
+    for v in values {
+        counts[v.min(bins - 1)] += 1;
+    }
+    counts
 }
 
 /// Reads the shot at `path` taken with `exposure` (ISO and aperture default to the

@@ -206,6 +206,8 @@ struct Session<'a> {
     f_number: f64,
     record: Record,
     shots: u64,
+    /// The scene's patch, for the DMX bytes each light is recorded with.
+    patch: Patch,
     /// Time spent in the camera's calls and waiting for the rig, so far: what capture's
     /// own overhead is measured without.
     waited: Duration,
@@ -267,6 +269,7 @@ pub fn capture(
         camera,
         record,
         shots: 0,
+        patch: Patch::new(scene),
         waited: Duration::ZERO,
     };
     if s.shutters.is_empty() {
@@ -324,15 +327,7 @@ impl Session<'_> {
             let mut test = visobjd_hdr::light_test(&merged.radiance, &ambient)?;
             let above = above_null(&merged.radiance, &ambient, &again);
             test.shows_light &= above >= test.min_lit_pixels;
-            tracing::debug!(
-                "light {ch}: {test:?}; exposures {:?}; clipped {}; mean {:?} ambient {:?} size {}x{}",
-                merged.exposures,
-                merged.clipped_everywhere,
-                merged.radiance.mean(),
-                ambient.mean(),
-                merged.radiance.width,
-                merged.radiance.height
-            );
+            tracing::debug!("light {ch}: {test:?}, {above} samples above the ambient's own spread");
             if !test.shows_light {
                 let why = format!(
                     "light {ch} ({name}) shows no light: unpatched, lamp out, or aimed out of frame?"
@@ -564,13 +559,6 @@ impl Session<'_> {
         for t in times {
             shots.push(self.shoot(&self.nearest(t))?);
         }
-        tracing::debug!(
-            "bracket: {:?}",
-            shots
-                .iter()
-                .map(|s| (s.exposure.seconds, s.high()))
-                .collect::<Vec<_>>()
-        );
         let frames: Vec<_> = shots.iter().map(decode::Shot::frame).collect();
         let settings = MergeSettings {
             width: Some(self.opts.width),
@@ -581,7 +569,7 @@ impl Session<'_> {
 
     /// The bytes light `l`'s slots are sent for `look`.
     fn dmx_of(&self, l: usize, look: &Look) -> (u16, u16, Vec<u8>) {
-        let patch = Patch::new(self.scene);
+        let patch = &self.patch;
         let bytes = patch.quantise(&patch.unmastered(look));
         let light = &self.scene.lights[l];
         let u = patch

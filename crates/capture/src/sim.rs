@@ -192,11 +192,6 @@ impl SimCamera {
     /// The sensor's reading, 0..1 of full scale, before clipping.
     fn expose(&mut self, seconds: f64) -> Vec<[f32; 3]> {
         let m = self.patch.multipliers(&self.dmx);
-        tracing::debug!(
-            "sim: {} lights lit, dmx[0][..8] {:?}",
-            m.iter().filter(|v| **v != [0.0; 3]).count(),
-            self.dmx.first().map(|d| &d[..8])
-        );
         let relative = (seconds * ISO / (F_NUMBER * F_NUMBER)) as f32;
         let mut out = vec![[0.0f32; 3]; self.width * self.height];
         for (light, basis) in m.iter().zip(&self.truth) {
