@@ -2,8 +2,8 @@
 //! over sACN, the sim photographs the scene's own basis images lit by the DMX it receives,
 //! and the captured basis must match those images. Also: the wire shows capture's
 //! priority and only the light being shot at full; a stopped capture resumes; a light
-//! that adds nothing is named and the exit status says so; `visobjd gallery` generates
-//! from the result.
+//! that adds nothing is named and the exit status says so; `visobjd run` loads the result,
+//! generates from it and puts a pick on the wire.
 
 mod common;
 
@@ -14,6 +14,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use common::capture::{W, basis_errors, config, light_6_is_untouched, listen, lit, stage};
+use common::daemon::{Daemon, Osc, Proto, Setup, int, same_look};
 use common::{bin, temp_dir};
 
 fn capture(config: &Path, extra: &[&str]) -> std::process::Output {
@@ -69,22 +70,23 @@ fn end_to_end(format: &str) {
     );
     let singles = packets.iter().filter(|p| lit(&p.dmx).0.len() == 1).count();
     assert!(singles > 0, "each light is shot alone");
-    // `visobjd gallery` generates from the captured scene (light 6 keeps its black image).
-    let refs = dir.join("refs");
-    std::fs::create_dir_all(&refs).expect("mkdir refs");
-    common::write_png(&refs.join("warm.png"), 24, 12, |x, _| {
-        [255, 120 + (x * 2) as u8, 40]
+    // `visobjd run` loads the captured scene (light 6 keeps its black image), generates
+    // from it and puts a pick on the wire.
+    let mut d = Daemon::start_setup(
+        &format!("captured-{format}"),
+        Setup {
+            scene_from: Some(dir.join("scene")),
+            ..Setup::default()
+        },
+    );
+    d.add_objective("warm.png", "both");
+    let generated = d.generate();
+    assert!(!generated.args.is_empty(), "a gallery: {generated:?}");
+    d.ok("/vo/pick", vec![int(1)], "/vo/picked");
+    assert!(same_look(&d.live(), &d.candidate(1, 1), 1e-6));
+    d.wire.wait(Proto::Sacn, 1, "the picked look", |dmx| {
+        dmx.iter().any(|&b| b > 0)
     });
-    let g = Command::new(bin())
-        .args(["gallery", "--scene"])
-        .arg(dir.join("scene"))
-        .arg("--ref")
-        .arg(refs.join("warm.png"))
-        .args(["--seed", "7", "--out"])
-        .arg(dir.join("sheet.png"))
-        .output()
-        .expect("visobjd gallery runs");
-    assert!(g.status.success(), "{}", String::from_utf8_lossy(&g.stderr));
     std::fs::remove_dir_all(&dir).ok();
 }
 

@@ -93,14 +93,15 @@ impl Fake {
         })
     }
 
-    /// `visobjd capture --config config` with the fake as its camera and `fault` added to
-    /// the fake's environment.
-    fn capture(&self, config: &Path, fault: &[(&str, &str)]) -> Output {
+    /// `visobjd capture --config config args` with the fake as its camera and `fault`
+    /// added to the fake's environment.
+    fn capture(&self, config: &Path, args: &[&str], fault: &[(&str, &str)]) -> Output {
         Command::new(bin())
             .args(["capture", "--config"])
             .arg(config)
             .args(["--settle", "0.02", "--seed", "3", "--width"])
             .arg(W.to_string())
+            .args(args)
             .envs(self.env.iter().map(|(k, v)| (k, v)))
             .envs(fault.iter().copied())
             .output()
@@ -149,12 +150,12 @@ fn setup(name: &str, extra_config: &str) -> Option<Setup> {
 }
 
 impl Setup {
-    /// A capture with `fault`, and the sACN packets the test received meanwhile.
-    fn run(&self, fault: &[(&str, &str)]) -> (Output, Vec<Sacn>) {
+    /// A capture with `args` and `fault`, and the sACN packets the test received meanwhile.
+    fn run(&self, args: &[&str], fault: &[(&str, &str)]) -> (Output, Vec<Sacn>) {
         let done = Arc::new(AtomicBool::new(false));
         let socket = self.socket.try_clone().expect("clone the receiver");
         let wire = listen(socket, Arc::clone(&done));
-        let out = self.fake.capture(&self.config, fault);
+        let out = self.fake.capture(&self.config, args, fault);
         done.store(true, Ordering::SeqCst);
         (out, wire.join().expect("listener"))
     }
@@ -185,7 +186,7 @@ fn gphoto2_capture_matches_the_basis_within_two_percent() {
     let Some(s) = setup("capture-gphoto2", "") else {
         return;
     };
-    let (out, packets) = s.run(&[]);
+    let (out, packets) = s.run(&[], &[]);
     assert!(
         std::fs::read_to_string(s.dir.join("calls.log"))
             .is_ok_and(|log| log.contains("--capture-image-and-download")),
@@ -256,13 +257,42 @@ fn gphoto2_capture_matches_the_basis_within_two_percent() {
     std::fs::remove_dir_all(&s.dir).ok();
 }
 
+/// `--format raw`: the fake writes DNGs with its own writer (PiDNG), a Bayer mosaic of a
+/// camera RGB that is not sRGB, and capture reads them through rawler and the file's
+/// colour matrix.
+#[test]
+fn gphoto2_raw_capture_matches_the_basis_within_two_percent() {
+    let Some(s) = setup("capture-gphoto2-raw", "") else {
+        return;
+    };
+    let (out, _) = s.run(&["--format", "raw", "--lights", "1-5"], &[]);
+    assert!(out.status.success(), "{}", text(&out));
+    let shots: Vec<String> = std::fs::read_to_string(s.dir.join("calls.log"))
+        .unwrap_or_default()
+        .lines()
+        .filter(|l| l.contains("--capture-image-and-download"))
+        .map(String::from)
+        .collect();
+    assert!(
+        !shots.is_empty(),
+        "the fake gphoto2 was used: {}",
+        text(&out)
+    );
+    assert!(
+        std::fs::read_to_string(s.dir.join("camera.json")).is_ok_and(|c| c.contains("\"RAW\"")),
+        "the body was set to RAW"
+    );
+    assert_accurate(&s.dir, "gphoto2 raw");
+    std::fs::remove_dir_all(&s.dir).ok();
+}
+
 #[test]
 fn a_camera_that_stops_answering_fails_clearly_and_the_capture_resumes() {
     let Some(s) = setup("capture-gphoto2-hang", "[capture]\ncamera_timeout_s = 3\n") else {
         return;
     };
     // Every capture while light 3 is lit alone hangs: its first frame, and the retry.
-    let (out, packets) = s.run(&[("FAKE_GPHOTO2_HANG_CAPTURE", "lit:3")]);
+    let (out, packets) = s.run(&[], &[("FAKE_GPHOTO2_HANG_CAPTURE", "lit:3")]);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success(), "{}", text(&out));
     assert!(
@@ -286,7 +316,7 @@ fn a_camera_that_stops_answering_fails_clearly_and_the_capture_resumes() {
     assert!(packets.iter().all(|p| p.priority == 200), "priority 200");
 
     // The same command without the fault resumes after lights 1 and 2.
-    let (again, _) = s.run(&[]);
+    let (again, _) = s.run(&[], &[]);
     let stdout = String::from_utf8_lossy(&again.stdout);
     assert!(
         stdout.contains("3 lights written, 2 already done, 1 showing no light"),

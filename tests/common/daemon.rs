@@ -108,6 +108,20 @@ pub fn fixture(channel: i32) -> Fixture {
         .expect("a stage channel")
 }
 
+/// Copies the folder `from` to `to`, recursively.
+fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).expect("mkdir");
+    for entry in std::fs::read_dir(from).expect("read the folder") {
+        let entry = entry.expect("a folder entry");
+        let target = to.join(entry.file_name());
+        if entry.file_type().expect("its type").is_dir() {
+            copy_dir(&entry.path(), &target);
+        } else {
+            std::fs::copy(entry.path(), &target).expect("copy a file");
+        }
+    }
+}
+
 /// Writes the scene, the references and an outside image into `dir`.
 fn build_stage(dir: &Path) {
     let lights: Vec<TestLight> = STAGE
@@ -1104,6 +1118,9 @@ pub struct Setup {
     pub extra: String,
     /// Environment variables the daemon is started with.
     pub env: Vec<(String, String)>,
+    /// A scene folder to run instead of the built test stage (copied in; the
+    /// references are the test stage's).
+    pub scene_from: Option<PathBuf>,
 }
 
 pub const LOCALHOST: IpAddr = IpAddr::V4(Ipv4Addr::LOCALHOST);
@@ -1117,6 +1134,7 @@ impl Default for Setup {
             client: LOCALHOST,
             extra: String::new(),
             env: Vec::new(),
+            scene_from: None,
         }
     }
 }
@@ -1167,6 +1185,11 @@ impl Daemon {
     pub fn start_setup_with(name: &str, setup: Setup, launch: Launch) -> Daemon {
         let dir = temp_dir(&format!("daemon-{name}"));
         build_stage(&dir);
+        if let Some(from) = &setup.scene_from {
+            let scene = dir.join("scene");
+            std::fs::remove_dir_all(&scene).expect("remove the test stage's scene");
+            copy_dir(from, &scene);
+        }
         let wire = Wire::start();
         let log = dir.join("stderr-0.log");
         let mut d = Daemon {

@@ -27,18 +27,19 @@ pub fn python_osc() -> bool {
         .is_ok_and(|o| o.status.success())
 }
 
-/// Whether python3 with Pillow, piexif and numpy (what `tests/peers/fake_gphoto2.py`
-/// needs) is here; if not, [`missing`] has said so (and failed the test under CI).
+/// Whether python3 with Pillow, piexif, numpy and PiDNG (what
+/// `tests/peers/fake_gphoto2.py` needs) is here; if not, [`missing`] has said so (and
+/// failed the test under CI).
 pub fn fake_gphoto2() -> bool {
     let ready = Command::new("python3")
-        .args(["-c", "import PIL, piexif, numpy"])
+        .args(["-c", "import PIL, piexif, numpy, pidng"])
         .output()
         .is_ok_and(|o| o.status.success());
     if !ready {
         missing(
-            "python3 with Pillow, piexif and numpy (the fake gphoto2)",
+            "python3 with Pillow, piexif, numpy and PiDNG (the fake gphoto2)",
             "is not installed",
-            "python3 -m pip install pillow piexif numpy",
+            "python3 -m pip install pillow piexif numpy pidng",
         );
     }
     ready

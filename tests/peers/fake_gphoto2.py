@@ -7,7 +7,7 @@ It answers the options visobjd uses the way gphoto2 2.5 documents them:
   --set-config KEY=VALUE             exit 1 with `*** Error (-2: 'Bad parameters') ***`
                                      for a value not among the choices
   --capture-image-and-download       one file per image format, named by --filename
-  --filename PATTERN                 %C suffix (JPG, CR2), %f camera name, %n number, %%
+  --filename PATTERN                 %C suffix (JPG, DNG), %f camera name, %n number, %%
   --force-overwrite                  without it, an existing file prompts on stdin
 Options may be combined; the settings options apply to every action, and the actions
 run in the order given, as in gphoto2.
@@ -43,7 +43,9 @@ Environment:
 Each frame is rendered (render_frame) from the scene scaled by the exposure through a
 simple camera response with clipping, and written as a JPEG whose EXIF holds the
 exposure the shutter really gave: the true 1/3-stop time (1/64 s for `1/60`), not the
-rounded label, as a rational ExposureTime; ISOSpeedRatings; FNumber.
+rounded label, as a rational ExposureTime; ISOSpeedRatings; FNumber. With the image
+format set to RAW the frame is written as a DNG instead (write_dng: PiDNG, a Bayer mosaic
+of the camera's own RGB with its colour matrix).
 """
 
 import json
@@ -152,10 +154,9 @@ def default_scene():
     return scene
 
 
-def render_frame(radiance, exposure_s, iso, f_number, noise=None):
-    """A frame as the camera would record it: linear radiance times the exposure
-    (time, ISO, aperture), through a gamma response, clipped to 8 bits; with `noise` (a
-    numpy Generator), shot and read noise before the response."""
+def sensor_signal(radiance, exposure_s, iso, f_number, noise=None):
+    """Linear radiance times the exposure (time, ISO, aperture) as a fraction of full
+    scale; with `noise` (a numpy Generator), shot and read noise."""
     import numpy as np
     # 1.0 radiance at 1/64 s, ISO 100, f/8 lands at 18% grey.
     gain = 0.18 * 64.0 * 64.0
@@ -165,8 +166,73 @@ def render_frame(radiance, exposure_s, iso, f_number, noise=None):
         electrons = 20000.0
         sigma = np.sqrt(np.clip(signal, 0.0, 1.0) / electrons + (2.0 / electrons) ** 2)
         signal = signal + noise.standard_normal(signal.shape).astype(np.float32) * sigma
+    return signal
+
+
+def render_frame(signal):
+    """The JPEG's pixels: the sensor signal through a gamma response, clipped to 8 bits."""
+    import numpy as np
     encoded = np.clip(signal, 0.0, 1.0) ** (1.0 / 2.2)
     return np.round(encoded * 255.0).astype(np.uint8)
+
+
+# The raw file: the camera's own RGB (its filters pass some of each other's light; rows:
+# camera R, G, B from linear sRGB) on an RGGB Bayer mosaic, 14 bits over a black level.
+CAMERA_RGB = [[0.75, 0.20, 0.05], [0.12, 0.76, 0.12], [0.03, 0.22, 0.75]]
+RAW_BLACK, RAW_WHITE = 600, 15000
+# IEC 61966-2-1: linear sRGB (D65) to CIE XYZ.
+SRGB_TO_XYZ = [[0.4124, 0.3576, 0.1805], [0.2126, 0.7152, 0.0722], [0.0193, 0.1192, 0.9505]]
+
+
+def write_dng(name, signal, exposure, iso, f_number, state):
+    """An uncompressed 16-bit Bayer DNG written by PiDNG (an independent DNG writer), as
+    a DNG-recording body makes one: the mosaic of the camera's RGB, BlackLevel,
+    WhiteLevel, ColorMatrix1 (XYZ to camera, D65) and the exposure as TIFF-context tags
+    in the main IFD (PiDNG writes no EXIF sub-IFD)."""
+    import numpy as np
+    from pidng.core import RAW2DNG, DNGTags, Tag
+    from pidng.defs import (CFAPattern, CalibrationIlluminant, DNGVersion, Orientation,
+                            PhotometricInterpretation)
+    cam = np.array(CAMERA_RGB, dtype=np.float64)
+    camera = np.clip(signal.astype(np.float64), 0.0, None) @ cam.T
+    h, w = camera.shape[0] // 2 * 2, camera.shape[1] // 2 * 2
+    mosaic = np.empty((h, w), dtype=np.float64)
+    mosaic[0::2, 0::2] = camera[0:h:2, 0:w:2, 0]
+    mosaic[0::2, 1::2] = camera[0:h:2, 1:w:2, 1]
+    mosaic[1::2, 0::2] = camera[1:h:2, 0:w:2, 1]
+    mosaic[1::2, 1::2] = camera[1:h:2, 1:w:2, 2]
+    raw = np.clip(np.round(RAW_BLACK + np.clip(mosaic, 0.0, 1.0) * (RAW_WHITE - RAW_BLACK)),
+                  0, RAW_WHITE).astype(np.uint16)
+    xyz_to_cam = cam @ np.linalg.inv(np.array(SRGB_TO_XYZ))
+    ccm = [[int(round(v * 10000)), 10000] for v in xyz_to_cam.flatten()]
+    fnum = Fraction(f_number).limit_denominator(100)
+    t = DNGTags()
+    t.set(Tag.ImageWidth, w)
+    t.set(Tag.ImageLength, h)
+    t.set(Tag.TileWidth, w)
+    t.set(Tag.TileLength, h)
+    t.set(Tag.Orientation, Orientation.Horizontal)
+    t.set(Tag.PhotometricInterpretation, PhotometricInterpretation.Color_Filter_Array)
+    t.set(Tag.SamplesPerPixel, 1)
+    t.set(Tag.BitsPerSample, 16)
+    t.set(Tag.CFARepeatPatternDim, [2, 2])
+    t.set(Tag.CFAPattern, CFAPattern.RGGB)
+    t.set(Tag.BlackLevel, RAW_BLACK)
+    t.set(Tag.WhiteLevel, RAW_WHITE)
+    t.set(Tag.ColorMatrix1, ccm)
+    t.set(Tag.CalibrationIlluminant1, CalibrationIlluminant.D65)
+    t.set(Tag.AsShotNeutral, [[1, 1], [1, 1], [1, 1]])
+    t.set(Tag.Make, "Canon")
+    t.set(Tag.Model, state["model"])
+    t.set(Tag.UniqueCameraModel, state["model"])
+    t.set(Tag.DNGVersion, DNGVersion.V1_4)
+    t.set(Tag.ExposureTime, [[exposure.numerator, exposure.denominator]])
+    t.set(Tag.FNumber, [[fnum.numerator, fnum.denominator]])
+    t.set(Tag.PhotographicSensitivity, [iso])
+    writer = RAW2DNG()
+    writer.options(t, path="", compress=False)
+    with open(name, "wb") as f:
+        f.write(writer.convert(raw))
 
 
 def parse_sacn(p):
@@ -345,16 +411,16 @@ def capture(state, filename, force):
             hang()
         seed = int(os.environ.get("FAKE_GPHOTO2_SEED", "1")) + state["captures"]
         noise = np.random.default_rng(seed)
-        pixels = render_frame(radiance, float(exposure), iso, f_number, noise)
+        signal = sensor_signal(radiance, float(exposure), iso, f_number, noise)
     else:
         scene_path = os.environ.get("FAKE_GPHOTO2_SCENE")
         radiance = np.load(scene_path).astype(np.float32) if scene_path else default_scene()
-        pixels = render_frame(radiance, float(exposure), iso, f_number)
-    image = Image.fromarray(pixels, "RGB")
+        signal = sensor_signal(radiance, float(exposure), iso, f_number)
+    image = Image.fromarray(render_frame(signal), "RGB")
     exif = exif_bytes(state, exposure, iso, f_number)
 
     fmt = config["imageformat"]["current"]
-    suffixes = (["CR2"] if "RAW" in fmt else []) + (["JPG"] if "JPEG" in fmt else [])
+    suffixes = (["DNG"] if "RAW" in fmt else []) + (["JPG"] if "JPEG" in fmt else [])
     state["image_number"] += 1
     stem = "IMG_%04d" % state["image_number"]
     for suffix in suffixes:
@@ -370,8 +436,7 @@ def capture(state, filename, force):
         if suffix == "JPG":
             image.save(name, "JPEG", quality=95, exif=exif)
         else:
-            # The RAW stand-in: a TIFF (as CR2 and NEF are) with the same EXIF.
-            image.save(name, "TIFF", exif=exif)
+            write_dng(name, signal, exposure, iso, f_number, state)
         print("Deleting file %s on the camera" % on_camera)
 
 

@@ -58,7 +58,7 @@ impl Format {
     pub fn extension(self) -> &'static str {
         match self {
             Format::Jpeg => "jpg",
-            Format::Raw => "tif",
+            Format::Raw => "dng",
         }
     }
 }
@@ -564,7 +564,11 @@ impl Session<'_> {
             width: Some(self.opts.width),
             ..MergeSettings::default()
         };
-        Ok(visobjd_hdr::merge(&frames, response.as_ref(), &settings)?)
+        let mut merged = visobjd_hdr::merge(&frames, response.as_ref(), &settings)?;
+        if let Some(m) = shots.first().and_then(decode::Shot::to_srgb) {
+            merged.radiance.transform(m);
+        }
+        Ok(merged)
     }
 
     /// The bytes light `l`'s slots are sent for `look`.

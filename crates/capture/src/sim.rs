@@ -4,7 +4,8 @@
 //! the scene's own basis images with it (for the demo: the images `visobjd synth` rendered
 //! from its rig), and photographs the result through a camera model: exposure, shot and
 //! read noise, black level, clipping; an 8-bit JPEG through an sRGB-like tone curve, or a
-//! linear 14-bit raw (a 16-bit TIFF carrying its black and white levels). Each file
+//! linear 14-bit raw (an uncompressed Bayer DNG with its black and white levels and
+//! colour matrix, read back through `rawler` like a camera's). Each file
 //! carries its exposure in EXIF, read back like a real camera's.
 
 use std::io::Cursor;
@@ -24,7 +25,7 @@ use visobjd_scene::Scene;
 
 use crate::Format;
 
-/// Raw black level and white level (14-bit), as the TIFF's `BlackLevel`/`WhiteLevel`.
+/// Raw black level and white level (14-bit), as the DNG's `BlackLevel`/`WhiteLevel`.
 pub const RAW_BLACK: u16 = 512;
 /// See [`RAW_BLACK`].
 pub const RAW_WHITE: u16 = 16383;
@@ -263,8 +264,8 @@ fn exif_fields(seconds: f64) -> Vec<exif::Field> {
     ]
 }
 
-/// A JPEG with an EXIF APP1 segment right after its SOI.
-fn write_jpeg(
+/// A JPEG with an EXIF APP1 segment right after its SOI. Public for the decode benchmark.
+pub fn write_jpeg(
     path: &Path,
     width: usize,
     height: usize,
@@ -302,43 +303,89 @@ fn write_jpeg(
     std::fs::write(path, out).map_err(|source| io("sim write", source))
 }
 
-/// A 16-bit linear RGB TIFF with its exposure, black and white levels as tags.
-fn write_raw(
+/// The sim sensor's colour: its red, green and blue filters each pass some of the
+/// others' light (rows: camera R, G, B from linear sRGB), as real filters do, so the raw
+/// path must apply the file's colour matrix to get the scene's colours back.
+const CAMERA_RGB: [[f64; 3]; 3] = [[0.80, 0.15, 0.05], [0.10, 0.80, 0.10], [0.02, 0.18, 0.80]];
+
+/// An uncompressed 16-bit colour-filter (RGGB Bayer) DNG, as a DNG-writing camera makes
+/// one: 14-bit samples over a black level, `ColorMatrix1` (XYZ to camera RGB, for D65)
+/// and the exposure in EXIF tags of the main IFD. Public for the decode benchmark.
+pub fn write_raw(
     path: &Path,
     width: usize,
     height: usize,
-    values: &[u16],
+    sensor: &[[f32; 3]],
     seconds: f64,
 ) -> Result<(), Error> {
-    use tiff::encoder::{TiffEncoder, colortype};
+    use tiff::encoder::{Rational, SRational, TiffEncoder, colortype};
     use tiff::tags::Tag;
     let fail = |e: tiff::TiffError| io("sim raw", std::io::Error::other(e.to_string()));
+    let span = f32::from(RAW_WHITE - RAW_BLACK);
+    let values: Vec<u16> = (0..height)
+        .flat_map(|y| (0..width).map(move |x| (y, x)))
+        .map(|(y, x)| {
+            // R G / G B
+            let c = (y % 2) + (x % 2);
+            let rgb = sensor[y * width + x];
+            let v: f32 = (0..3).map(|k| CAMERA_RGB[c][k] as f32 * rgb[k]).sum();
+            (f32::from(RAW_BLACK) + v * span)
+                .round()
+                .clamp(0.0, f32::from(RAW_WHITE)) as u16
+        })
+        .collect();
+    // XYZ -> camera = CAMERA_RGB * (sRGB -> XYZ)^-1.
+    let xyz_to_srgb = crate::decode::invert(crate::decode::SRGB_TO_XYZ)
+        .ok_or_else(|| io("sim raw", std::io::Error::other("singular sRGB matrix")))?;
+    let matrix: Vec<SRational> = (0..9)
+        .map(|i| {
+            let v: f64 = (0..3)
+                .map(|k| CAMERA_RGB[i / 3][k] * xyz_to_srgb[k][i % 3])
+                .sum();
+            SRational {
+                n: (v * 1_000_000.0).round() as i32,
+                d: 1_000_000,
+            }
+        })
+        .collect();
     let file = std::fs::File::create(path).map_err(|source| io("sim raw", source))?;
     let mut encoder = TiffEncoder::new(std::io::BufWriter::new(file)).map_err(fail)?;
     let mut image = encoder
-        .new_image::<colortype::RGB16>(width as u32, height as u32)
+        .new_image::<colortype::Gray16>(width as u32, height as u32)
         .map_err(fail)?;
-    let t = tiff::encoder::Rational {
+    let dir = image.encoder();
+    let tag = |t: u16| Tag::Unknown(t);
+    dir.write_tag(Tag::PhotometricInterpretation, 32803u16) // colour filter array
+        .map_err(fail)?;
+    dir.write_tag(Tag::Make, "visobjd").map_err(fail)?;
+    dir.write_tag(Tag::Model, "simulated camera")
+        .map_err(fail)?;
+    dir.write_tag(tag(50706), &[1u8, 4, 0, 0][..])
+        .map_err(fail)?; // DNGVersion
+    dir.write_tag(tag(50708), "visobjd simulated camera") // UniqueCameraModel
+        .map_err(fail)?;
+    dir.write_tag(tag(33421), &[2u16, 2][..]).map_err(fail)?; // CFARepeatPatternDim
+    dir.write_tag(tag(33422), &[0u8, 1, 1, 2][..])
+        .map_err(fail)?; // CFAPattern: RGGB
+    dir.write_tag(tag(50714), RAW_BLACK).map_err(fail)?; // BlackLevel
+    dir.write_tag(tag(50717), RAW_WHITE).map_err(fail)?; // WhiteLevel
+    dir.write_tag(tag(50721), &matrix[..]).map_err(fail)?; // ColorMatrix1
+    dir.write_tag(tag(50778), 21u16).map_err(fail)?; // CalibrationIlluminant1: D65
+    let t = Rational {
         n: (seconds * 10_000.0).round() as u32,
         d: 10_000,
     };
-    let dir = image.encoder();
-    dir.write_tag(Tag::Unknown(0x829A), t).map_err(fail)?; // ExposureTime
+    dir.write_tag(tag(0x829A), t).map_err(fail)?; // ExposureTime
     dir.write_tag(
-        Tag::Unknown(0x829D),
-        tiff::encoder::Rational {
+        tag(0x829D),
+        Rational {
             n: (F_NUMBER * 10.0) as u32,
             d: 10,
         },
     )
     .map_err(fail)?; // FNumber
-    dir.write_tag(Tag::Unknown(0x8827), ISO as u16)
-        .map_err(fail)?; // ISOSpeedRatings
-    dir.write_tag(Tag::Unknown(crate::decode::BLACK_LEVEL), RAW_BLACK)
-        .map_err(fail)?;
-    dir.write_tag(Tag::Unknown(crate::decode::WHITE_LEVEL), RAW_WHITE)
-        .map_err(fail)?;
-    image.write_data(values).map_err(fail)
+    dir.write_tag(tag(0x8827), ISO as u16).map_err(fail)?; // ISOSpeedRatings
+    image.write_data(&values).map_err(fail)
 }
 
 impl Camera for SimCamera {
@@ -422,20 +469,7 @@ impl Camera for SimCamera {
                 let rgb: Vec<u8> = sensor.iter().flat_map(|p| p.map(tone)).collect();
                 write_jpeg(&path, self.width, self.height, &rgb, seconds)?;
             }
-            Format::Raw => {
-                let span = f32::from(RAW_WHITE - RAW_BLACK);
-                let values: Vec<u16> = sensor
-                    .iter()
-                    .flat_map(|p| {
-                        p.map(|v| {
-                            (f32::from(RAW_BLACK) + v * span)
-                                .round()
-                                .clamp(0.0, f32::from(RAW_WHITE)) as u16
-                        })
-                    })
-                    .collect();
-                write_raw(&path, self.width, self.height, &values, seconds)?;
-            }
+            Format::Raw => write_raw(&path, self.width, self.height, &sensor, seconds)?,
         }
         let exposure = visobjd_camera::read_exposure(&path)?.ok_or_else(|| Error::Exif {
             path: path.clone(),

@@ -59,6 +59,16 @@ impl Radiance {
         }
     }
 
+    /// Takes every pixel through the 3x3 matrix `m` (row-major): camera RGB to linear sRGB
+    /// for a raw capture, after the merge (both are linear, so the order does not matter
+    /// and the merge works on the sensor's own values).
+    pub fn transform(&mut self, m: [[f32; 3]; 3]) {
+        for p in &mut self.pixels {
+            let c = *p;
+            *p = m.map(|row| row[0] * c[0] + row[1] * c[1] + row[2] * c[2]);
+        }
+    }
+
     /// Mean of every sample (all channels), in f64.
     pub fn mean(&self) -> f64 {
         let n = self.pixels.len() * 3;
