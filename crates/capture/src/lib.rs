@@ -372,7 +372,7 @@ impl Session<'_> {
         let end = self
             .shoot_look(&Look::off(self.scene.lights.len()), true)?
             .radiance;
-        let drift = visobjd_hdr::ambient_drift(&ambient, &end)?;
+        let drift = visobjd_hdr::ambient_drift(&ambient, &again, &end)?;
         if drift.relative > 0.05 {
             self.progress.warn(&format!(
                 "the ambient light changed by {:.0}% between the start and the end (work lights, a door, daylight?): the basis images carry the difference",

@@ -36,32 +36,44 @@ pub fn subtract_ambient(light: &Radiance, ambient: &Radiance) -> Result<Radiance
 /// How much the ambient changed between two merges of it.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct AmbientDrift {
-    /// `sum |end - start| / sum (start + end) / 2` over all samples: 0 when identical,
-    /// includes noise (about 1% for a well-exposed merge at 480 px). Warn above ~5%.
+    /// `(sum |end - start| - sum |again - start|) / max(sum (start + end) / 2, sum |again -
+    /// start|)` over all samples, at least 0: the change beyond what two merges of the same
+    /// ambient differ by (noise), relative to the ambient or, on a dark stage, the noise.
+    /// A dark stage's ambient is mostly noise, so without taking the noise out its
+    /// "change" would be near 100% every time. Warn above ~5%.
     pub relative: f64,
     /// `(mean(end) - mean(start)) / mean(start)`: signed overall brightening or dimming.
     pub mean_change: f64,
 }
 
-/// Compares the ambient merged at the start and at the end of a capture.
-pub fn ambient_drift(start: &Radiance, end: &Radiance) -> Result<AmbientDrift, HdrError> {
+/// Compares the ambient merged at the start (`start`, and `again`: a second merge of the
+/// same ambient right after it, the measure of noise) with the one merged at the end.
+pub fn ambient_drift(
+    start: &Radiance,
+    again: &Radiance,
+    end: &Radiance,
+) -> Result<AmbientDrift, HdrError> {
     same_size(start, end)?;
-    let (mut diff, mut sum, mut s0, mut s1) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
-    for (a, b) in start
+    same_size(start, again)?;
+    let (mut diff, mut null, mut sum, mut s0, mut s1) = (0.0f64, 0.0f64, 0.0f64, 0.0f64, 0.0f64);
+    for ((a, b), n) in start
         .pixels
         .iter()
         .flatten()
         .zip(end.pixels.iter().flatten())
+        .zip(again.pixels.iter().flatten())
     {
-        let (a, b) = (f64::from(*a), f64::from(*b));
+        let (a, b, n) = (f64::from(*a), f64::from(*b), f64::from(*n));
         diff += (b - a).abs();
+        null += (n - a).abs();
         sum += (a + b) / 2.0;
         s0 += a;
         s1 += b;
     }
     let ratio = |n: f64, d: f64| if d > 0.0 { n / d } else { 0.0 };
     Ok(AmbientDrift {
-        relative: ratio(diff, sum),
+        // Over the noise too: a dark stage's ambient sums to about nothing.
+        relative: ratio((diff - null).max(0.0), sum.max(null)),
         mean_change: ratio(s1 - s0, s0),
     })
 }

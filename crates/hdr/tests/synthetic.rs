@@ -294,14 +294,28 @@ fn ambient_is_subtracted_and_drift_and_dead_lights_are_reported() {
     assert!(median(errs) < 0.02);
     assert!(pool.pixels.iter().flatten().all(|&v| v >= 0.0));
 
-    // Drift: two merges of the same ambient agree; a 10% brighter one does not.
-    let same = ambient_drift(&amb1, &amb2).unwrap();
+    // Drift: a third merge of the same ambient agrees with the first beyond the noise two
+    // merges of it show; a 10% brighter one does not.
+    let amb3 = merged_raw(&ambient, 15);
+    let same = ambient_drift(&amb1, &amb2, &amb3).unwrap();
     assert!(same.relative < 0.02, "{same:?}");
     assert!(same.mean_change.abs() < 0.005, "{same:?}");
     let brighter: Vec<[f32; 3]> = ambient.iter().map(|p| p.map(|v| v * 1.1)).collect();
-    let drifted = ambient_drift(&amb1, &merged_raw(&brighter, 13)).unwrap();
+    let drifted = ambient_drift(&amb1, &amb2, &merged_raw(&brighter, 13)).unwrap();
     assert!((drifted.mean_change - 0.1).abs() < 0.01, "{drifted:?}");
     assert!(drifted.relative > 0.05, "{drifted:?}");
+    // A dark stage: an ambient of nothing but noise has not drifted.
+    let dark = vec![[0.0f32; 3]; W * H];
+    let (d1, d2, d3) = (
+        merged_raw(&dark, 16),
+        merged_raw(&dark, 17),
+        merged_raw(&dark, 18),
+    );
+    let noise = ambient_drift(&d1, &d2, &d3).unwrap();
+    assert!(noise.relative < 0.05, "{noise:?}");
+    // ... and one where a work light came on before the end has.
+    let lit = ambient_drift(&d1, &d2, &merged_raw(&with_pool(&dark, 0.01), 19)).unwrap();
+    assert!(lit.relative > 0.05, "{lit:?}");
 
     // A light that adds nothing is flagged; a dim one (1% of the ambient's bright end,
     // in a pool) is not; the bright one neither.
