@@ -245,7 +245,7 @@ fn raw_plus_jpeg_returns_both_files() {
         .capture(&shutter("0.5"), &rig.dir.join("f.jpg"))
         .expect("a frame");
     let names: Vec<_> = frame.paths.iter().filter_map(|p| p.file_name()).collect();
-    assert_eq!(names, ["f.CR2", "f.JPG"]);
+    assert_eq!(names, ["f.DNG", "f.JPG"]);
     assert_eq!(frame.exposure.seconds, 0.5);
 }
 
