@@ -133,8 +133,8 @@ pub fn solve(emitters: &[[f64; 3]], target: [f64; 3]) -> Solution {
     }
     for (level, e) in solution.levels[..len].iter().zip(emitters) {
         if *level > 0.0 {
-            for k in 0..3 {
-                solution.reached[k] += level * e[k];
+            for (r, v) in solution.reached.iter_mut().zip(e) {
+                *r += level * v;
             }
         }
     }
@@ -250,7 +250,7 @@ fn most_light(g: &[[f64; 2]], y: &[f64], l: &mut [f64]) {
     for i in 0..n {
         for j in i + 1..n {
             let det = cross(g[i], g[j]);
-            if !(det.abs() > PARALLEL * norm(g[i]) * norm(g[j])) {
+            if det.abs() <= PARALLEL * norm(g[i]) * norm(g[j]) {
                 continue;
             }
             let lambda = [
@@ -291,7 +291,10 @@ fn most_light(g: &[[f64; 2]], y: &[f64], l: &mut [f64]) {
 /// line through the target's, or all at it): λ along that line, at the best breakpoint
 /// (λ = 0, so every emitter full, when all are at the target's chromaticity).
 fn along_one_line(g: &[[f64; 2]], y: &[f64], dual: &dyn Fn([f64; 2]) -> f64) -> [f64; 2] {
-    let longest = g.iter().copied().fold([0.0; 2], |a, b| if norm(b) > norm(a) { b } else { a });
+    let longest = g
+        .iter()
+        .copied()
+        .fold([0.0; 2], |a, b| if norm(b) > norm(a) { b } else { a });
     let size = norm(longest);
     if size == 0.0 {
         return [0.0; 2];
@@ -369,7 +372,7 @@ fn least_drive(free: &[usize], g: &[[f64; 2]], rest: [f64; 2], l: &mut [f64]) {
     let half = 0.5 * (m[0] + m[2]);
     let disc = (0.25 * (m[0] - m[2]).powi(2) + m[1] * m[1]).sqrt();
     let (top, bottom) = (half + disc, half - disc);
-    if !(top > 0.0) {
+    if top <= 0.0 {
         for &k in free {
             l[k] = 0.0;
         }

@@ -27,9 +27,21 @@ const fn minor(m: &[[f64; 3]; 3], r0: usize, c0: usize, r1: usize, c1: usize) ->
 /// The inverse of a non-singular 3x3 matrix, by its adjugate.
 const fn invert(m: [[f64; 3]; 3]) -> [[f64; 3]; 3] {
     let cof = [
-        [minor(&m, 1, 1, 2, 2), minor(&m, 1, 2, 2, 0), minor(&m, 1, 0, 2, 1)],
-        [minor(&m, 2, 1, 0, 2), minor(&m, 2, 2, 0, 0), minor(&m, 2, 0, 0, 1)],
-        [minor(&m, 0, 1, 1, 2), minor(&m, 0, 2, 1, 0), minor(&m, 0, 0, 1, 1)],
+        [
+            minor(&m, 1, 1, 2, 2),
+            minor(&m, 1, 2, 2, 0),
+            minor(&m, 1, 0, 2, 1),
+        ],
+        [
+            minor(&m, 2, 1, 0, 2),
+            minor(&m, 2, 2, 0, 0),
+            minor(&m, 2, 0, 0, 1),
+        ],
+        [
+            minor(&m, 0, 1, 1, 2),
+            minor(&m, 0, 2, 1, 0),
+            minor(&m, 0, 0, 1, 1),
+        ],
     ];
     let det = m[0][0] * cof[0][0] + m[0][1] * cof[0][1] + m[0][2] * cof[0][2];
     // The inverse is the transposed cofactor matrix over the determinant.
@@ -137,8 +149,9 @@ pub fn ciede2000(lab1: [f64; 3], lab2: [f64; 3]) -> f64 {
     };
     // (15)-(22): the weights and the rotation term for blues.
     let cos = |deg: f64| deg.to_radians().cos();
-    let t = 1.0 - 0.17 * cos(h_mean - 30.0) + 0.24 * cos(2.0 * h_mean) + 0.32 * cos(3.0 * h_mean + 6.0)
-        - 0.20 * cos(4.0 * h_mean - 63.0);
+    let t =
+        1.0 - 0.17 * cos(h_mean - 30.0) + 0.24 * cos(2.0 * h_mean) + 0.32 * cos(3.0 * h_mean + 6.0)
+            - 0.20 * cos(4.0 * h_mean - 63.0);
     let d_theta = 30.0 * (-((h_mean - 275.0) / 25.0).powi(2)).exp();
     let r_c = 2.0 * (cp_mean.powi(7) / (cp_mean.powi(7) + P25_7)).sqrt();
     let l50 = (l_mean - 50.0).powi(2);
@@ -147,7 +160,9 @@ pub fn ciede2000(lab1: [f64; 3], lab2: [f64; 3]) -> f64 {
     let s_h = 1.0 + 0.015 * cp_mean * t;
     let r_t = -(2.0 * d_theta).to_radians().sin() * r_c;
     let (tl, tc, th) = (dl / s_l, dc / s_c, dh_big / s_h);
-    (tl * tl + tc * tc + th * th + r_t * tc * th).max(0.0).sqrt()
+    (tl * tl + tc * tc + th * th + r_t * tc * th)
+        .max(0.0)
+        .sqrt()
 }
 
 #[cfg(test)]
@@ -182,11 +197,17 @@ mod tests {
         [50.0, 2.5, 0.0, 50.0, 3.2972, 0.0, 1.0000],
         [50.0, 2.5, 0.0, 50.0, 1.8634, 0.5757, 1.0000],
         [50.0, 2.5, 0.0, 50.0, 3.2592, 0.3350, 1.0000],
-        [60.2574, -34.0099, 36.2677, 60.4626, -34.1751, 39.4387, 1.2644],
-        [63.0109, -31.0961, -5.8663, 62.8187, -29.7946, -4.0864, 1.2630],
+        [
+            60.2574, -34.0099, 36.2677, 60.4626, -34.1751, 39.4387, 1.2644,
+        ],
+        [
+            63.0109, -31.0961, -5.8663, 62.8187, -29.7946, -4.0864, 1.2630,
+        ],
         [61.2901, 3.7196, -5.3901, 61.4292, 2.2480, -4.9620, 1.8731],
         [35.0831, -44.1164, 3.7933, 35.0232, -40.0716, 1.5901, 1.8645],
-        [22.7233, 20.0904, -46.6940, 23.0331, 14.9730, -42.5619, 2.0373],
+        [
+            22.7233, 20.0904, -46.6940, 23.0331, 14.9730, -42.5619, 2.0373,
+        ],
         [36.4612, 47.8580, 18.3852, 36.2715, 50.5065, 21.2231, 1.4146],
         [90.8027, -2.0831, 1.4410, 91.1528, -1.6435, 0.0447, 1.4441],
         [90.9257, -0.5406, -0.9208, 88.6381, -0.8985, -0.7239, 1.5381],
@@ -200,7 +221,12 @@ mod tests {
             let (a, b) = ([p[0], p[1], p[2]], [p[3], p[4], p[5]]);
             for (x, y) in [(a, b), (b, a)] {
                 let got = ciede2000(x, y);
-                assert!((got - p[6]).abs() < 5e-5, "pair {}: {got}, want {}", i + 1, p[6]);
+                assert!(
+                    (got - p[6]).abs() < 5e-5,
+                    "pair {}: {got}, want {}",
+                    i + 1,
+                    p[6]
+                );
             }
         }
         assert_eq!(ciede2000([50.0, 10.0, -3.0], [50.0, 10.0, -3.0]), 0.0);
@@ -208,10 +234,13 @@ mod tests {
 
     #[test]
     fn matrices_are_inverse_and_white_is_d65() {
-        for r in 0..3 {
-            for c in 0..3 {
-                let p: f64 = (0..3).map(|k| SRGB_TO_XYZ[r][k] * XYZ_TO_SRGB[k][c]).sum();
-                assert!((p - f64::from(u8::from(r == c))).abs() < 1e-12, "{r} {c}: {p}");
+        for c in 0..3 {
+            let product = mul(&SRGB_TO_XYZ, XYZ_TO_SRGB.map(|row| row[c]));
+            for (r, p) in product.iter().enumerate() {
+                assert!(
+                    (p - f64::from(u8::from(r == c))).abs() < 1e-12,
+                    "{r} {c}: {p}"
+                );
             }
         }
         // The published rows are rounded to 7 decimals: Y's sum to 1.0000001.
@@ -231,7 +260,10 @@ mod tests {
         let d65 = xyy_to_xyz(0.3127, 0.3290, 1.0);
         assert!((d65[0] - D65[0]).abs() < 5e-4 && (d65[2] - D65[2]).abs() < 5e-4);
         let [u, v] = xyz_to_uv(D65).unwrap_or_default();
-        assert!((u - 0.1978).abs() < 1e-4 && (v - 0.4683).abs() < 1e-4, "{u} {v}");
+        assert!(
+            (u - 0.1978).abs() < 1e-4 && (v - 0.4683).abs() < 1e-4,
+            "{u} {v}"
+        );
         assert_eq!(xyz_to_uv([0.0; 3]), None);
         assert_eq!(xyy_to_xyz(0.3, 0.0, 1.0), [0.0; 3]);
         // sRGB red is x 0.64, y 0.33.

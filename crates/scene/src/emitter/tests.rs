@@ -65,7 +65,8 @@ fn mix(emitters: &[[f64; 3]], levels: &[f64]) -> [f64; 3] {
 }
 
 fn det3(c: [[f64; 3]; 3]) -> f64 {
-    c[0][0] * (c[1][1] * c[2][2] - c[2][1] * c[1][2]) - c[1][0] * (c[0][1] * c[2][2] - c[2][1] * c[0][2])
+    c[0][0] * (c[1][1] * c[2][2] - c[2][1] * c[1][2])
+        - c[1][0] * (c[0][1] * c[2][2] - c[2][1] * c[0][2])
         + c[2][0] * (c[0][1] * c[1][2] - c[1][1] * c[0][2])
 }
 
@@ -142,8 +143,7 @@ fn rgb_with_srgb_primaries_gives_todays_levels() {
                 srgb8[big] = 255;
                 let linear = srgb8.map(|v| f64::from(srgb_to_linear(f32::from(v as u8) / 255.0)));
                 let s = solve(&e, linear_srgb_to_xyz(linear));
-                for k in 0..3 {
-                    let (got, want) = (s.levels()[k], linear[k]);
+                for (&got, want) in s.levels().iter().zip(linear) {
                     assert!((got - want).abs() < 1e-9, "{srgb8:?}: {:?}", s.levels());
                     assert_eq!((got * 255.0).round(), (want * 255.0).round());
                 }
@@ -164,17 +164,30 @@ fn in_gamut_targets_are_reproduced_bounded_and_repeatable() {
         let mut count = 0;
         // Every mix of the emitters at 0, 1/3, 2/3 and full: a grid over the gamut.
         for code in 1..4usize.pow(n as u32) {
-            let levels: Vec<f64> = (0..n).map(|k| (code / 4usize.pow(k as u32) % 4) as f64 / 3.0).collect();
+            let levels: Vec<f64> = (0..n)
+                .map(|k| (code / 4usize.pow(k as u32) % 4) as f64 / 3.0)
+                .collect();
             let target = mix(&e, &levels);
             let s = solve(&e, target);
-            assert!(s.levels().iter().all(|v| (0.0..=1.0).contains(v)), "{name}: {:?}", s.levels());
+            assert!(
+                s.levels().iter().all(|v| (0.0..=1.0).contains(v)),
+                "{name}: {:?}",
+                s.levels()
+            );
             assert!(s.in_gamut(), "{name} {levels:?}: shifted {}", s.shift);
             let de = delta_e(&s, target, white_y);
             worst = worst.max(de);
-            assert!(de < 0.01, "{name} {levels:?}: ΔE00 {de}, levels {:?}", s.levels());
+            assert!(
+                de < 0.01,
+                "{name} {levels:?}: ΔE00 {de}, levels {:?}",
+                s.levels()
+            );
             // At least as much light as the mix it came from (scaled to full).
             let top = levels.iter().copied().fold(0.0, f64::max);
-            assert!(s.reached[1] >= target[1] / top * (1.0 - 1e-9), "{name} {levels:?}");
+            assert!(
+                s.reached[1] >= target[1] / top * (1.0 - 1e-9),
+                "{name} {levels:?}"
+            );
             let again = solve(&e, target);
             assert_eq!(again.levels().map_bits(), s.levels().map_bits());
             assert_eq!(again.reached.map(f64::to_bits), s.reached.map(f64::to_bits));
@@ -259,20 +272,42 @@ fn out_of_gamut_targets_land_on_the_nearest_boundary_point() {
     targets.push(linear_srgb_to_xyz([1.0, -0.2, 0.0]));
     targets.push(linear_srgb_to_xyz([-0.1, 0.3, 1.0]));
     for (name, e) in fixtures() {
-        let outside = if name == "7-colour" { &targets[..locus.len()] } else { &targets[..] };
+        let outside = if name == "7-colour" {
+            &targets[..locus.len()]
+        } else {
+            &targets[..]
+        };
         for &target in outside {
             let s = solve(&e, target);
             let wanted = uv(target);
             let reached = uv(s.reached);
-            let moved = ((wanted[0] - reached[0]).powi(2) + (wanted[1] - reached[1]).powi(2)).sqrt();
+            let moved =
+                ((wanted[0] - reached[0]).powi(2) + (wanted[1] - reached[1]).powi(2)).sqrt();
             let nearest = distance_to_gamut(&e, wanted);
-            assert!(s.shift > 0.0 && !s.in_gamut(), "{name}: {target:?} counted in gamut");
-            assert!((moved - s.shift).abs() < 1e-9, "{name}: moved {moved}, shift {}", s.shift);
-            assert!((moved - nearest).abs() < 1e-9, "{name}: moved {moved}, nearest {nearest}");
-            assert!(distance_to_gamut(&e, reached) < 1e-9, "{name}: not on the boundary");
+            assert!(
+                s.shift > 0.0 && !s.in_gamut(),
+                "{name}: {target:?} counted in gamut"
+            );
+            assert!(
+                (moved - s.shift).abs() < 1e-9,
+                "{name}: moved {moved}, shift {}",
+                s.shift
+            );
+            assert!(
+                (moved - nearest).abs() < 1e-9,
+                "{name}: moved {moved}, nearest {nearest}"
+            );
+            assert!(
+                distance_to_gamut(&e, reached) < 1e-9,
+                "{name}: not on the boundary"
+            );
             assert!(s.levels().iter().all(|v| (0.0..=1.0).contains(v)));
             let best = brute_most_light(&e, s.reached);
-            assert!((s.reached[1] - best).abs() <= 1e-7 * best, "{name}: {} vs {best}", s.reached[1]);
+            assert!(
+                (s.reached[1] - best).abs() <= 1e-7 * best,
+                "{name}: {} vs {best}",
+                s.reached[1]
+            );
         }
         // The reached colour is reported in linear sRGB too.
         let s = solve(&e, targets[0]);
@@ -284,7 +319,12 @@ fn out_of_gamut_targets_land_on_the_nearest_boundary_point() {
 #[test]
 fn black_and_unusable_input_give_zeros() {
     let e = fixtures().remove(3).1;
-    for target in [[0.0; 3], [f64::NAN, 1.0, 1.0], [-1.0, -1.0, -1.0], [1.0, f64::INFINITY, 0.0]] {
+    for target in [
+        [0.0; 3],
+        [f64::NAN, 1.0, 1.0],
+        [-1.0, -1.0, -1.0],
+        [1.0, f64::INFINITY, 0.0],
+    ] {
         let s = solve(&e, target);
         assert!(s.levels().iter().all(|&v| v == 0.0), "{target:?}");
         assert_eq!(s.reached, [0.0; 3]);
@@ -321,7 +361,11 @@ fn degenerate_emitter_sets() {
     let halfway = mix(&[red, green], &[0.3, 1.0]);
     let s = solve(&[red, green], halfway);
     assert!(s.in_gamut());
-    assert!((s.levels()[0] - 0.3).abs() < 1e-9 && s.levels()[1] == 1.0, "{:?}", s.levels());
+    assert!(
+        (s.levels()[0] - 0.3).abs() < 1e-9 && s.levels()[1] == 1.0,
+        "{:?}",
+        s.levels()
+    );
     let s = solve(&[red, green], anything);
     assert!(s.shift > 0.0);
     assert!((s.shift - distance_to_gamut(&[red, green], uv(anything))).abs() < 1e-12);
@@ -372,8 +416,15 @@ fn assert_least_drive(e: &[[f64; 3]], levels: &[f64], rng: &mut Rng) {
         let ld: f64 = levels.iter().zip(&d).map(|(a, b)| a * b).sum();
         for s in [lo, hi, (-ld / dd).clamp(lo, hi)] {
             if s.is_finite() {
-                let drive: f64 = levels.iter().zip(&d).map(|(l, dk)| (l + s * dk).powi(2)).sum();
-                assert!(drive >= base - 1e-9, "{levels:?}: {drive} < {base} along {d:?}");
+                let drive: f64 = levels
+                    .iter()
+                    .zip(&d)
+                    .map(|(l, dk)| (l + s * dk).powi(2))
+                    .sum();
+                assert!(
+                    drive >= base - 1e-9,
+                    "{levels:?}: {drive} < {base} along {d:?}"
+                );
             }
         }
     }
@@ -393,16 +444,30 @@ fn ties_take_the_least_drive() {
     doubled.push(doubled[0].map(|v| v * 0.5));
     let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
     let mut traded = 0;
-    for (name, e) in [("rgba", rgba), ("rgbal", rgbal), ("rgb + half red", doubled)] {
+    for (name, e) in [
+        ("rgba", rgba),
+        ("rgbal", rgbal),
+        ("rgb + half red", doubled),
+    ] {
         for _ in 0..200 {
             let levels: Vec<f64> = (0..e.len()).map(|_| rng.next()).collect();
             let target = mix(&e, &levels);
             let s = solve(&e, target);
             let best = brute_most_light(&e, target);
-            assert!((s.reached[1] - best).abs() <= 1e-7 * best, "{name}: {} vs {best}", s.reached[1]);
+            assert!(
+                (s.reached[1] - best).abs() <= 1e-7 * best,
+                "{name}: {} vs {best}",
+                s.reached[1]
+            );
             assert!(delta_e(&s, target, 1.0) < 0.01);
             assert_least_drive(&e, s.levels(), &mut rng);
-            traded += usize::from(s.levels().iter().filter(|v| **v > 1e-9 && **v < 1.0 - 1e-9).count() > 2);
+            traded += usize::from(
+                s.levels()
+                    .iter()
+                    .filter(|v| **v > 1e-9 && **v < 1.0 - 1e-9)
+                    .count()
+                    > 2,
+            );
         }
     }
     // The cases exercise real ties (more than two emitters between 0 and full).
@@ -421,4 +486,3 @@ fn at_scales_levels_and_reached_colour() {
     assert!(s.at(f64::NAN).levels().iter().all(|&v| v == 0.0));
     assert_eq!(s.at(7.0).levels(), s.levels());
 }
-
