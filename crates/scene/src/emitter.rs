@@ -14,8 +14,8 @@ pub mod colour;
 
 use colour::{xyz_to_linear_srgb, xyz_to_uv};
 
-/// The most emitters a solve handles; emitters past it are left at 0, so profiles must
-/// refuse more (no fixture type comes near: 7-colour LED engines are the widest made).
+/// The most emitters a solve handles; emitters past it are ignored (no level), so profiles
+/// must refuse more. No fixture type comes near: the widest LED engines have 7 or 8 colours.
 pub const MAX_EMITTERS: usize = 16;
 
 /// Within this distance (u'v') of the emitters' gamut a chromaticity counts as inside.
@@ -56,10 +56,10 @@ impl Solution {
         self.shift == 0.0
     }
 
-    /// The solution at `intensity` (clamped to 0..1) of its light, levels and reached
-    /// colour scaled alike: what a fixture without a dimmer sends. With a dimmer, the
-    /// emitters take [`Solution::levels`] (the colour at its most light) and the dimmer
-    /// takes the intensity.
+    /// The same colour at `intensity` (clamped to 0..1, NaN as 0) of the most light: levels
+    /// and reached colour scaled alike, what a fixture without a dimmer sends. With a
+    /// dimmer, the emitters take [`Solution::levels`] (the colour at its most light) and
+    /// the dimmer takes the intensity.
     pub fn at(&self, intensity: f64) -> Solution {
         let k = if intensity.is_nan() {
             0.0
