@@ -1,6 +1,7 @@
 //! Times `emitter::solve` per call for fixtures of 3, 4, 5 and 7 emitters, on in-gamut
 //! targets (random mixes of the emitters) and on targets anywhere (random chromaticities,
-//! many outside the gamut). Run with
+//! many outside the gamut), and for a fixture whose solutions tie (the least-drive path).
+//! Run with
 //! `cargo run --release -p visobjd-scene --example emitter_solve`.
 
 use std::hint::black_box;
@@ -25,9 +26,12 @@ fn main() {
     ]
     .map(gdtf);
     let srgb = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]].map(linear_srgb_to_xyz);
-    let fixtures: [(&str, Vec<[f64; 3]>); 4] = [
+    // Amber as today's patch models it, on the red-green line: most targets tie.
+    let collinear = linear_srgb_to_xyz([1.0, 0.45, 0.0]);
+    let fixtures: [(&str, Vec<[f64; 3]>); 5] = [
         ("3 (sRGB)", srgb.to_vec()),
         ("4 (RGBW)", vec![r, g, b, w]),
+        ("4 (ties)", vec![srgb[0], srgb[1], srgb[2], collinear]),
         ("5 (RGBAW)", vec![r, g, b, a, w]),
         ("7 (RGBALCI)", vec![r, g, b, a, lime, cyan, indigo]),
     ];

@@ -185,7 +185,7 @@ fn nearest_in_gamut(points: &[[f64; 2]], c: [f64; 2]) -> ([f64; 2], f64) {
             return (c, 0.0);
         }
     }
-    let mut best = nearest_on(hull[0], hull[(1) % h]);
+    let mut best = nearest_on(hull[0], hull[1 % h]);
     for i in 1..h {
         let candidate = nearest_on(hull[i], hull[(i + 1) % h]);
         if candidate.1 < best.1 {
