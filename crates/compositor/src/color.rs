@@ -1,18 +1,36 @@
 //! Colour science shared by objectives, the compositor and the gallery: CIELAB (D65) and
 //! the fast sRGB encoders, so every stage measures colour the same way (the scalar sRGB
-//! transfer functions are the scene model's, [`visobjd_scene::srgb`]).
+//! transfer functions are the scene model's, [`visobjd_scene::srgb`]; the sRGB-to-XYZ
+//! matrix and the white are the emitter solve's, [`visobjd_scene::emitter::colour`], here
+//! in `f32` for speed).
 
+use visobjd_scene::emitter::colour::{D65, SRGB_TO_XYZ};
 use visobjd_scene::srgb::{linear_to_srgb_f64, srgb_to_linear};
 
 #[cfg(target_arch = "x86_64")]
 use crate::cpu::{Avx2Fma, Avx512F};
 
+/// A row of [`SRGB_TO_XYZ`] in `f32` (each entry has 7 decimals, so these are the `f32`
+/// values of the published decimals).
+const fn xyz_row(r: usize) -> [f32; 3] {
+    let row = SRGB_TO_XYZ[r];
+    [row[0] as f32, row[1] as f32, row[2] as f32]
+}
+
+/// The rows of the linear sRGB to XYZ matrix.
+const X: [f32; 3] = xyz_row(0);
+const Y: [f32; 3] = xyz_row(1);
+const Z: [f32; 3] = xyz_row(2);
+/// The D65 white's X and Z (its Y is 1).
+const XN: f32 = D65[0] as f32;
+const ZN: f32 = D65[2] as f32;
+
 /// CIELAB (D65 white) of a linear-light RGB colour: L* in 0..100.
 pub fn linear_to_lab(rgb: [f32; 3]) -> [f32; 3] {
     let [r, g, b] = rgb;
-    let x = (0.412_456_4 * r + 0.357_576_1 * g + 0.180_437_5 * b) / 0.950_47;
-    let y = 0.212_672_9 * r + 0.715_152_2 * g + 0.072_175 * b;
-    let z = (0.019_333_9 * r + 0.119_192 * g + 0.950_304_1 * b) / 1.088_83;
+    let x = (X[0] * r + X[1] * g + X[2] * b) / XN;
+    let y = Y[0] * r + Y[1] * g + Y[2] * b;
+    let z = (Z[0] * r + Z[1] * g + Z[2] * b) / ZN;
     let (fx, fy, fz) = (lab_f(x), lab_f(y), lab_f(z));
     [116.0 * fy - 16.0, 500.0 * (fx - fy), 200.0 * (fy - fz)]
 }
@@ -58,10 +76,7 @@ fn lab_planar<const FMA: bool>(rgb: [&[f32]; 3], lab: &mut [f32]) {
     let b_out = &mut b_out[..n];
     let (r, g, b) = (&rgb[0][..n], &rgb[1][..n], &rgb[2][..n]);
     // The XYZ matrix's rows, X and Z already divided by the white point's.
-    const X: [f32; 3] = [0.412_456_4, 0.357_576_1, 0.180_437_5];
-    const Y: [f32; 3] = [0.212_672_9, 0.715_152_2, 0.072_175];
-    const Z: [f32; 3] = [0.019_333_9, 0.119_192, 0.950_304_1];
-    let (x, z) = (X.map(|k| k / 0.950_47), Z.map(|k| k / 1.088_83));
+    let (x, z) = (X.map(|k| k / XN), Z.map(|k| k / ZN));
     let row = |k: [f32; 3], r, g, b: f32| madd::<FMA>(r, k[0], madd::<FMA>(g, k[1], b * k[2]));
     for i in 0..n {
         let (r, g, b) = (
@@ -148,7 +163,7 @@ pub fn lightness(y: f32) -> f32 {
 
 /// Relative luminance (Y) of linear sRGB.
 pub fn luminance(rgb: [f32; 3]) -> f32 {
-    0.212_672_9 * rgb[0] + 0.715_152_2 * rgb[1] + 0.072_175 * rgb[2]
+    Y[0] * rgb[0] + Y[1] * rgb[1] + Y[2] * rgb[2]
 }
 
 /// The CIELAB companding function, with the linear segment near black.
@@ -783,6 +798,19 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// The shared matrix and white in `f32` are bit for bit the published decimals (what
+    /// this module used before they were shared), so no Lab value moved.
+    #[test]
+    fn shared_constants_are_the_published_f32_values() {
+        let published: [[f32; 3]; 3] = [
+            [0.412_456_4, 0.357_576_1, 0.180_437_5],
+            [0.212_672_9, 0.715_152_2, 0.072_175],
+            [0.019_333_9, 0.119_192, 0.950_304_1],
+        ];
+        assert_eq!([X, Y, Z], published);
+        assert_eq!((XN, ZN), (0.950_47, 1.088_83));
     }
 
     #[test]

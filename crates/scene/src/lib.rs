@@ -4,6 +4,7 @@
 //! all refuse the same broken scenes with the same messages. Basis images are loaded
 //! separately (by the compositor crate's `basis`) because the daemon restores the stage before it reads them.
 
+pub mod emitter;
 pub mod look;
 pub mod profile;
 pub mod srgb;
