@@ -220,10 +220,11 @@ impl Merger {
         Some(out)
     }
 
-    /// The sources seen (not lost) at `now`, by CID.
+    /// The sources seen (not lost) at `now`, by CID: streams that have sent levels (a
+    /// stream of 0xDD packets alone sources nothing).
     pub fn sources(&self, now: Instant) -> Vec<SourceInfo> {
         let mut by_cid: BTreeMap<Uuid, SourceInfo> = BTreeMap::new();
-        for (&(universe, cid), s) in &self.streams {
+        for (&(universe, cid), s) in self.streams.iter().filter(|(_, s)| s.levels.is_some()) {
             let age = now.saturating_duration_since(s.last_packet);
             let info = by_cid.entry(cid).or_insert_with(|| SourceInfo {
                 cid,
@@ -354,9 +355,11 @@ mod tests {
             [10, 20],
             "0xDD values are not levels"
         );
-        // A source that sends only 0xDD never counts, however long it lasts.
+        // A source that sends only 0xDD never counts, however long it lasts, and is not
+        // listed as a source.
         m.receive(&dd(THIRD, 0, &[255, 255]), t0);
         assert_eq!(first(&m, ms(t0, 1600), 2), [10, 20]);
+        assert!(m.sources(ms(t0, 1600)).iter().all(|s| s.cid != THIRD));
         // Levels of 1 are not read as priorities: slot priorities stay 200.
         m.receive(&levels(CONSOLE, 100, 2, &[1, 1]), ms(t0, 1700));
         m.receive(&levels(BACKUP, 150, 1, &[7, 7]), ms(t0, 1700));
