@@ -371,11 +371,9 @@ mod tests {
         let (mut m, t0) = merger();
         m.receive(&levels(CONSOLE, 100, 0, &[10]), t0);
         m.receive(&levels(BACKUP, 50, 0, &[77]), t0);
-        let mut seq = 1;
-        for t in (0..=3000).step_by(500) {
+        for (seq, t) in (1..).zip((0..=3000).step_by(500)) {
             m.receive(&dd(CONSOLE, seq, &[200]), ms(t0, t));
             m.receive(&levels(BACKUP, 50, seq, &[77]), ms(t0, t));
-            seq += 1;
         }
         assert_eq!(first(&m, ms(t0, 2499), 1), [10]);
         assert_eq!(first(&m, ms(t0, 2500), 1), [77], "lost at 2.5 s");
