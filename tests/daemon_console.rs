@@ -356,6 +356,23 @@ fn grab_reproduces_the_console_on_every_light_and_ignores_the_daemons_own_output
     // The daemon's own output (priority 200, looped back) is not a source.
     assert!(sources(&mut d).is_empty(), "its own output is not a source");
 
+    // Malformed packets are dropped and logged; the receiver carries on.
+    let junk = UdpSocket::bind("127.0.0.1:0").expect("bind");
+    let mut lying = encode_sacn([5; 16], "liar", 100, 0, 0, 1, 0, &[255; 512]);
+    lying[16..18].copy_from_slice(&0x7005u16.to_be_bytes());
+    for p in [&b"ASC-E1.17"[..], &lying[..], &lying[..60]] {
+        junk.send_to(p, input).expect("send");
+    }
+    let end = Instant::now() + PATIENCE;
+    while !d.log_text().contains("malformed packet") {
+        assert!(
+            Instant::now() < end,
+            "no malformed-packet line in the log:\n{}",
+            d.log()
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+
     let console = Console::start(input, 1, "Eos", show(100, &console_levels()));
     let listed = wait_sources(&mut d, "the console", |s| !s.is_empty());
     assert_eq!(
@@ -375,10 +392,10 @@ fn grab_reproduces_the_console_on_every_light_and_ignores_the_daemons_own_output
     let want = console.show.lock().expect("show").levels.clone();
     until_output(&mut d, "/vo/console/grab", vec![], &want);
 
-    // The grab is the base (an undo step): undo goes back to the dark look.
+    // The grab is the base (an undo step): undoing goes back to the dark look.
     let live = d.live();
     assert!(live.iter().any(|l| l.intensity > 0.5), "{live:?}");
-    d.ok("/vo/undo", vec![], "/vo/undone");
+    while num(&d.ok("/vo/undo", vec![], "/vo/undone").args[0]) > 0.0 {}
     assert!(d.live().iter().all(|l| l.intensity == 0.0));
     // The status line (tablets, the web page) shows the source.
     let line = status_line(&mut d);
