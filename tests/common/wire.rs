@@ -1,5 +1,6 @@
 //! Art-Net 4 and E1.31 packets decoded from the specifications' byte offsets, independently
-//! of the sending code. Malformed packets fail the test that receives them.
+//! of the sending code. Malformed packets fail the test that receives them. Also an E1.31
+//! encoder written from the same offsets, for test peers that play a console.
 
 /// ACN packet identifier (E1.31-2018 Table 4-1, octets 4-15).
 pub const ACN_ID: &[u8; 12] = b"ASC-E1.17\0\0\0";

@@ -2,10 +2,11 @@
 //!
 //! The `sacn` crate's parsers are not used for received packets: they slice the buffer by
 //! the PDU length fields without first checking that those lengths cover the fixed
-//! headers (`E131RootLayer::parse` takes `&buf[22..length]`, `DataPacketFramingLayer::parse`
-//! `&buf[77..length]`), so a short or lying packet from the network panics the receiver
-//! instead of being dropped. A data packet has fixed offsets (Table 4-1), so reading it
-//! here is short and checks every field the standard fixes.
+//! headers, so a lying packet from the network panics the receiver instead of being
+//! dropped (sacn 0.11.1: a valid data packet with its root-layer length set to 5, or its
+//! framing-layer length to 16, panics in `AcnRootLayerProtocol::parse`). A data packet has
+//! fixed offsets (Table 4-1), so reading it here is short and checks every field the
+//! standard fixes.
 
 use uuid::Uuid;
 
@@ -202,6 +203,23 @@ mod tests {
             short[at..at + 2].copy_from_slice(&(base as u16).to_be_bytes());
         }
         assert_eq!(parse(&short).expect("valid").expect("data").slots.len(), 24);
+    }
+
+    #[test]
+    fn no_cut_or_changed_byte_panics() {
+        let good = packet(1, false);
+        for cut in 0..=good.len() {
+            let _ = parse(&good[..cut]);
+        }
+        for at in 0..good.len() {
+            for v in [0x00, 0x01, 0x70, 0x7f, 0xc0, 0xff] {
+                let mut b = good.clone();
+                b[at] = v;
+                if let Ok(Some(p)) = parse(&b) {
+                    assert!(p.slots.len() <= SLOTS && p.priority <= 200);
+                }
+            }
+        }
     }
 
     #[test]
