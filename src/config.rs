@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use serde::Deserialize;
 
 use crate::eos::EosConfig;
-use visobjd_dmx::OutputConfig;
+use visobjd_dmx::{InputConfig, OutputConfig};
 use visobjd_scene::describe_toml_error;
 
 /// The whole configuration, paths resolved.
@@ -25,6 +25,8 @@ pub struct Config {
     pub osc: OscConfig,
     /// DMX outputs.
     pub output: OutputConfig,
+    /// The console's DMX received (none by default).
+    pub input: InputConfig,
     /// Generation defaults.
     pub generate: GenerateConfig,
     /// The Eos console presets are exported to (none by default).
@@ -43,6 +45,7 @@ struct ConfigFile {
     state_dir: PathBuf,
     osc: OscConfig,
     output: OutputConfig,
+    input: InputConfig,
     generate: GenerateConfig,
     eos: EosConfig,
     http: HttpConfig,
@@ -57,6 +60,7 @@ impl Default for ConfigFile {
             state_dir: "../state".into(),
             osc: OscConfig::default(),
             output: OutputConfig::default(),
+            input: InputConfig::default(),
             generate: GenerateConfig::default(),
             eos: EosConfig::default(),
             http: HttpConfig::default(),
@@ -282,6 +286,9 @@ impl Config {
             return Err(at((*m).to_string()));
         }
         file.eos.console().map_err(at)?;
+        if let Some(sacn) = &file.input.sacn {
+            sacn.addresses().map_err(at)?;
+        }
         Ok(Config {
             path: path.to_path_buf(),
             scene: resolve(&file.scene),
@@ -289,6 +296,7 @@ impl Config {
             state_dir: resolve(&file.state_dir),
             osc: file.osc,
             output: file.output,
+            input: file.input,
             generate: file.generate,
             eos: file.eos,
             http: file.http,
@@ -362,6 +370,22 @@ mod tests {
         let e = Config::parse(Path::new("c.toml"), "[http]\nlisten = \"8080\"\n").unwrap_err();
         assert!(e.contains("http.listen"), "{e}");
         let e = Config::parse(Path::new("c.toml"), "[http]\nport = 1\n").unwrap_err();
+        assert!(e.contains("port"), "{e}");
+    }
+
+    #[test]
+    fn sacn_input_is_off_by_default_and_checked() {
+        let c = Config::parse(Path::new("c.toml"), "").unwrap();
+        assert_eq!(c.input.sacn, None);
+        let c = Config::parse(
+            Path::new("c.toml"),
+            "[input.sacn]\nbind = \"127.0.0.1:5568\"\nuniverses = [1, 2]\n",
+        )
+        .unwrap();
+        assert_eq!(c.input.sacn.unwrap().universes, [1, 2]);
+        let e = Config::parse(Path::new("c.toml"), "[input.sacn]\nuniverses = []\n").unwrap_err();
+        assert!(e.starts_with("c.toml: input.sacn.universes"), "{e}");
+        let e = Config::parse(Path::new("c.toml"), "[input.sacn]\nport = 1\n").unwrap_err();
         assert!(e.contains("port"), "{e}");
     }
 

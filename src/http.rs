@@ -11,7 +11,7 @@
 //! | request | answer |
 //! | --- | --- |
 //! | `GET /` | the page |
-//! | `GET /state.json` | status line, gallery serial and sizes, live entry, live-look hash, objectives |
+//! | `GET /state.json` | status line, gallery serial and sizes, live entry, live-look hash, objectives, the console sources (`console`: name, priority, universes, `age_s`, `sampling`; null without `[input.sacn]`) |
 //! | `GET /thumb/<serial>/<k>.jpg` | entry k of gallery `serial` (404 once a newer generate replaced it) |
 //! | `GET /live.jpg` | the live look |
 //! | `GET /ref/<id>.jpg` | objective id's reference image, at most 320 px wide |
@@ -359,11 +359,26 @@ fn state(e: &Engine) -> serde_json::Value {
             })).collect::<Vec<_>>(),
         })
     });
+    let console = e.console_sources().map(|sources| {
+        sources
+            .iter()
+            .map(|s| {
+                json!({
+                    "name": s.name,
+                    "priority": s.priority,
+                    "universes": s.universes,
+                    "age_s": s.age.as_secs_f32(),
+                    "sampling": !s.active,
+                })
+            })
+            .collect::<Vec<_>>()
+    });
     json!({
         "scene": e.stage.scene.name,
         "aspect": e.stage.thumbs.width as f32 / e.stage.thumbs.height.max(1) as f32,
         "status": status,
         "output": output,
+        "console": console,
         "generating": e.is_generating(),
         "gallery": gallery.map(|(serial, seed, sizes)| json!({
             "serial": serial,

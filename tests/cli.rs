@@ -401,7 +401,8 @@ fn check_fits_a_small_screen_and_names_the_web_gallery_and_console() {
         &config,
         format!(
             "scene = \"scene\"\n[osc]\nallow = [{}]\n[http]\nlisten = \"127.0.0.1:8080\"\n\
-             [eos]\naddress = \"10.101.0.5:3032\"\nprotocol = \"tcp-slip\"\n",
+             [eos]\naddress = \"10.101.0.5:3032\"\nprotocol = \"tcp-slip\"\n\
+             [input.sacn]\nbind = \"127.0.0.1:5568\"\nuniverses = [7]\n",
             allow.join(", ")
         ),
     )
@@ -417,6 +418,11 @@ fn check_fits_a_small_screen_and_names_the_web_gallery_and_console() {
         text.contains("eos      presets to 10.101.0.5:3032 over tcp-slip"),
         "{text}"
     );
+    assert!(
+        text.contains("input    console sACN on 127.0.0.1:5568, universes [7],"),
+        "{text}"
+    );
+    assert!(text.contains("not received (they grab dark)"), "{text}");
     // The long allow-list wraps instead of running off a booth screen.
     assert!(text.contains("10.101.8.0/24"), "{text}");
     for line in text.lines().filter(|l| !l.contains(dir.to_str().unwrap())) {

@@ -156,6 +156,7 @@ fn the_gallery_over_http() {
     assert_eq!(st["gallery"]["sizes"].as_array().map(Vec::len), Some(n));
     assert_eq!(st["objectives"][0]["image"], "warm.png");
     assert_eq!(st["objectives"][0]["region"][2], 0.5);
+    assert!(st["console"].is_null(), "no [input.sacn]: no console part");
     let serial = st["gallery"]["serial"].as_u64().expect("a serial");
 
     let first = jpeg(&get(addr, &format!("/thumb/{serial}/1.jpg")));

@@ -132,6 +132,38 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         },
     );
     line(
+        "input",
+        match &config.input.sacn {
+            Some(sacn) => {
+                let missing: Vec<String> = patch
+                    .universes()
+                    .iter()
+                    .filter(|u| !sacn.universes.contains(u))
+                    .map(u16::to_string)
+                    .collect();
+                format!(
+                    "console sACN on {}{}, universes {:?}{}",
+                    sacn.bind,
+                    if sacn.interface.is_empty() {
+                        String::new()
+                    } else {
+                        format!(" (multicast on {})", sacn.interface)
+                    },
+                    sacn.universes,
+                    if missing.is_empty() {
+                        String::new()
+                    } else {
+                        format!(
+                            ", scene universes {} not received (they grab dark)",
+                            missing.join(" ")
+                        )
+                    }
+                )
+            }
+            None => "off".to_string(),
+        },
+    );
+    line(
         "output",
         format!(
             "{} sACN and {} Art-Net destinations at {} Hz, fade {} s",

@@ -15,8 +15,8 @@ use crate::engine::persist::{Files, restore_live};
 use crate::engine::session::Session;
 use crate::engine::{Engine, EngineHandler};
 use crate::osc::Server;
-use visobjd_dmx::Output;
 use visobjd_dmx::Patch;
+use visobjd_dmx::{Input, Output};
 use visobjd_method::stage::{Stage, THUMB_WIDTH};
 use visobjd_scene::Scene;
 use visobjd_scene::look::Look;
@@ -65,6 +65,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         config.output.artnet.len()
     );
 
+    // The console's input ignores the output's own CID (its packets may loop back).
+    let input = config
+        .input
+        .sacn
+        .as_ref()
+        .map(|c| Input::start(c, output.cid()))
+        .transpose()
+        .map_err(|e| anyhow::anyhow!("{}: {e}", config.path.display()))?;
+
     let started = std::time::Instant::now();
     let session = Session::new(
         &scene,
@@ -81,7 +90,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         stage.thumbs.height,
         started.elapsed().as_secs_f32()
     );
-    let engine = Arc::new(Engine::new(&config, stage, output, session)?);
+    let engine = Arc::new(Engine::new(&config, stage, output, input, session)?);
 
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
@@ -132,6 +141,12 @@ async fn serve(config: &Config, engine: &Arc<Engine>) -> anyhow::Result<()> {
     };
     let _ = sd_notify::notify(&[sd_notify::NotifyState::Ready]);
     let mut tasks = Vec::new();
+    if let Some(changes) = engine.console_changes() {
+        tasks.push(tokio::spawn(crate::cmd::follow_console(
+            Arc::clone(engine),
+            changes,
+        )));
+    }
     if let Some(period) = sd_notify::watchdog_enabled() {
         tasks.push(tokio::spawn(watchdog(Arc::clone(engine), period)));
     }

@@ -5,6 +5,7 @@
 //!
 //! A command that fails changes nothing and answers one `/vo/error`.
 
+mod console;
 mod constraint;
 mod gallery;
 mod generate;
@@ -29,6 +30,7 @@ use visobjd_scene::look::Look;
 enum Command {
     Objective(objective::Cmd),
     Constraint(constraint::Cmd),
+    Console(console::Cmd),
     Generate(generate::Cmd),
     Gallery(gallery::Cmd),
     Live(live::Cmd),
@@ -44,6 +46,9 @@ impl Command {
         }
         if let Some(c) = constraint::Cmd::parse(req)? {
             return Ok(Command::Constraint(c));
+        }
+        if let Some(c) = console::Cmd::parse(req)? {
+            return Ok(Command::Console(c));
         }
         if let Some(c) = generate::Cmd::parse(req)? {
             return Ok(Command::Generate(c));
@@ -74,6 +79,7 @@ impl Command {
         match self {
             Command::Objective(_) => "objective",
             Command::Constraint(_) => "constraint",
+            Command::Console(_) => "console",
             Command::Generate(_) => "generate",
             Command::Gallery(_) => "gallery",
             Command::Live(_) => "live",
@@ -87,6 +93,7 @@ impl Command {
         match self {
             Command::Objective(c) => c.apply(e),
             Command::Constraint(c) => c.apply(e),
+            Command::Console(c) => c.apply(e),
             Command::Generate(c) => c.apply(e, peer),
             Command::Gallery(c) => c.apply(e),
             Command::Live(c) => c.apply(e),
@@ -97,6 +104,7 @@ impl Command {
     }
 }
 
+pub use console::follow as follow_console;
 pub use gallery::sizes as gallery_sizes;
 
 /// Parses and applies one message: its replies, or the sentence for `/vo/error`.

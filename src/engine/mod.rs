@@ -30,7 +30,8 @@ use crate::osc::{Handler, Peer, Sender};
 use crate::shutdown::Threads;
 use persist::{Files, Snapshot, Writer};
 use session::{Gallery, Session};
-use visobjd_dmx::{Output, OutputStats};
+use visobjd_dmx::input::SourceInfo;
+use visobjd_dmx::{Input, Output, OutputStats, Patch};
 use visobjd_method::objective::{Objective, decode_reference};
 use visobjd_method::sampler::Spread;
 use visobjd_method::stage::{GenerateRequest, Stage};
@@ -58,6 +59,10 @@ pub struct Engine {
     palette_size: usize,
     spread: Spread,
     output: Mutex<Option<Output>>,
+    /// The console's sACN, if `[input.sacn]` is configured.
+    input: Mutex<Option<Input>>,
+    /// The scene's patch, to read the console's DMX back as a look.
+    patch: Patch,
     session: Mutex<Session>,
     generating: AtomicBool,
     /// Held while a reference is decoded: one at a time, so many senders adding 64-megapixel
@@ -88,11 +93,13 @@ pub struct Engine {
 pub const TEST_HOOKS: &str = "VISOBJD_TEST_HOOKS";
 
 impl Engine {
-    /// An engine over a loaded stage, restored from `state_dir`, driving `output`.
+    /// An engine over a loaded stage, restored from `state_dir`, driving `output` and
+    /// reading the console through `input`.
     pub fn new(
         config: &Config,
         stage: Arc<Stage>,
         output: Output,
+        input: Option<Input>,
         mut session: Session,
     ) -> std::io::Result<Engine> {
         let files = Files::new(&config.state_dir);
@@ -108,6 +115,8 @@ impl Engine {
                 fill: config.generate.sigma_fill,
             },
             output: Mutex::new(Some(output)),
+            input: Mutex::new(input),
+            patch: Patch::new(&stage.scene),
             session: Mutex::new(session),
             generating: AtomicBool::new(false),
             reading: Mutex::new(()),
@@ -205,11 +214,51 @@ impl Engine {
         Ok(out)
     }
 
+    /// Runs `f` on the console input, if one is configured and still running.
+    fn with_input<T>(&self, f: impl FnOnce(&Input) -> T) -> Option<T> {
+        let guard = self.input.lock().unwrap_or_else(|p| p.into_inner());
+        guard.as_ref().map(f)
+    }
+
+    /// Changes of the console's merged output (`None` without `[input.sacn]`).
+    pub fn console_changes(&self) -> Option<tokio::sync::watch::Receiver<u64>> {
+        self.with_input(Input::changes)
+    }
+
+    /// The console sources seen now (`None` without `[input.sacn]`).
+    pub fn console_sources(&self) -> Option<Vec<SourceInfo>> {
+        self.with_input(Input::sources)
+    }
+
+    /// The merged console output read back through the patch as a look, with how many
+    /// sources made it; a sentence when there is no input or no source counts yet.
+    pub fn console_look(&self) -> Result<(Look, usize), String> {
+        let read = self.with_input(|input| {
+            let console = input.console(self.patch.universes());
+            if console.sources == 0 {
+                return Err(format!(
+                    "no console source is being received on universes {:?} at {} (a new source counts once it has been seen for {:.1} s)",
+                    input.universes(),
+                    input.bind(),
+                    visobjd_dmx::input::SAMPLE.as_secs_f32()
+                ));
+            }
+            Ok((self.patch.look(&console.dmx), console.sources))
+        });
+        read.unwrap_or_else(|| {
+            Err("no console input is configured: add [input.sacn] with bind and universes to the config (docs/config.md)".into())
+        })
+    }
+
     /// Waits for the generates and exports still running, stops the output (three
     /// Stream_Terminated packets per sACN universe) and writes the state still queued
     /// (called by [`crate::shutdown::finish`]).
     pub fn shutdown(&self) {
         self.threads.join();
+        let input = self.input.lock().unwrap_or_else(|p| p.into_inner()).take();
+        if let Some(input) = input {
+            input.shutdown();
+        }
         let out = self.output.lock().unwrap_or_else(|p| p.into_inner()).take();
         if let Some(out) = out {
             out.shutdown();
@@ -432,6 +481,18 @@ impl Engine {
                 args.push(OscType::Int(errors.min(i32::MAX as u64) as i32));
             }
         }
+        if let Some(sources) = self.console_sources() {
+            args.push(OscType::String("console".into()));
+            args.push(OscType::Int(sources.len() as i32));
+            for src in sources {
+                args.extend([
+                    OscType::String(src.name),
+                    OscType::Int(i32::from(src.priority)),
+                    OscType::String(universe_list(&src.universes)),
+                    OscType::Float(src.age.as_secs_f32()),
+                ]);
+            }
+        }
         msg("/vo/status", args)
     }
 
@@ -485,6 +546,9 @@ impl Engine {
         if let Some(h) = self.output_stats() {
             parts.push(h.summary());
         }
+        if let Some(sources) = self.console_sources() {
+            parts.push(console_summary(&sources, s.following));
+        }
         parts.join(", ")
     }
 
@@ -537,6 +601,40 @@ impl Engine {
             s.last_seen = Instant::now();
         }
     }
+}
+
+/// Universes as status lists them: `1 2 5`.
+fn universe_list(universes: &[u16]) -> String {
+    universes
+        .iter()
+        .map(u16::to_string)
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+/// The status line's console part: `console: Eos (100, u1 2, 0.1 s ago)`, `sampling` for a
+/// source not counted yet, `following` while the base follows it.
+fn console_summary(sources: &[SourceInfo], following: bool) -> String {
+    let list = if sources.is_empty() {
+        "no source".to_string()
+    } else {
+        sources
+            .iter()
+            .map(|s| {
+                format!(
+                    "{} ({}, u{}, {:.1} s ago{})",
+                    s.name,
+                    s.priority,
+                    universe_list(&s.universes),
+                    s.age.as_secs_f32(),
+                    if s.active { "" } else { ", sampling" }
+                )
+            })
+            .collect::<Vec<_>>()
+            .join("; ")
+    };
+    let follow = if following { ", following" } else { "" };
+    format!("console{follow}: {list}")
 }
 
 /// A fault a test injects (see [`Engine::test_hook`]).

@@ -53,13 +53,19 @@ impl Gallery {
     }
 }
 
-/// What a change of the base look came from, so fader moves coalesce into one undo step.
+/// What a change of the base look came from, so fader moves coalesce into one undo step
+/// and following the console knows when to stop.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Change {
-    /// Pick, next, prev, recall: one undo step each.
+    /// Pick, next, prev, recall: one undo step each; following the console stops.
     Step,
-    /// A fader (light or group intensity/colour): consecutive ones are one undo step.
+    /// A fader (light or group intensity/colour): consecutive ones are one undo step;
+    /// following the console stops.
     Fader,
+    /// A console grab (or the start of following): one undo step; following goes on.
+    Grab,
+    /// A followed console change: consecutive ones are one undo step.
+    Follow,
 }
 
 /// Everything the engine keeps between messages.
@@ -100,6 +106,9 @@ pub struct Session {
     pub blackout: bool,
     /// Saved looks by number.
     pub looks: BTreeMap<u32, LookFile>,
+    /// The base follows the console (`/vo/console/follow`), until a visobjd look is set.
+    /// Not kept across restarts.
+    pub following: bool,
 }
 
 impl Session {
@@ -126,6 +135,7 @@ impl Session {
             master: 1.0,
             blackout: false,
             looks: BTreeMap::new(),
+            following: false,
         }
     }
 
@@ -146,9 +156,14 @@ impl Session {
         }
     }
 
-    /// Makes `look` both base and live, remembering the old base for undo.
+    /// Makes `look` both base and live, remembering the old base for undo. A look that is
+    /// not the console's (a pick, recall, fader) ends following the console.
     pub fn set_base(&mut self, look: Look, change: Change) {
-        let coalesce = change == Change::Fader && self.last_change == Some(Change::Fader);
+        let coalesce =
+            matches!(change, Change::Fader | Change::Follow) && self.last_change == Some(change);
+        if matches!(change, Change::Step | Change::Fader) {
+            self.following = false;
+        }
         if !coalesce {
             self.undo.push(self.base.clone());
             if self.undo.len() > HISTORY {
@@ -180,6 +195,7 @@ impl Session {
     fn after_history_step(&mut self) {
         self.live = self.base.clone();
         self.entry = None;
+        self.following = false;
         self.last_change = Some(Change::Step);
     }
 
@@ -219,6 +235,28 @@ mod tests {
         assert_eq!(s.undo(), Some(0));
         assert_eq!(s.base, look(0.0));
         assert_eq!(s.undo(), None);
+    }
+
+    #[test]
+    fn following_stops_at_a_visobjd_look_and_its_changes_are_one_step() {
+        let mut s = Session::new(&scene(), 100, 12, 2.0);
+        s.set_base(look(0.1), Change::Grab);
+        s.following = true;
+        for i in 2..6 {
+            s.set_base(look(i as f32 / 10.0), Change::Follow);
+        }
+        assert!(s.following);
+        assert_eq!(s.undo(), Some(1), "the followed changes are one step");
+        assert_eq!(s.base, look(0.1));
+        assert!(!s.following, "an undo is a visobjd look");
+        s.following = true;
+        s.set_base(look(0.2), Change::Grab);
+        assert!(s.following, "a grab keeps following");
+        s.set_base(look(0.3), Change::Fader);
+        assert!(!s.following);
+        s.following = true;
+        s.set_base(look(0.4), Change::Step);
+        assert!(!s.following);
     }
 
     #[test]

@@ -22,6 +22,7 @@ pub const TRIGGERS: &[&str] = &[
     "/vo/status",
     "/vo/objectives",
     "/vo/objective/clear",
+    "/vo/console/grab",
     "/vo/objective/*/palette",
     "/vo/objective/*/remove",
     "/vo/unsubscribe",

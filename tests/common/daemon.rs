@@ -276,7 +276,13 @@ pub struct Health {
 
 impl Health {
     pub fn parse(m: &OscMessage) -> Health {
-        let a = &m.args;
+        // The console part (with `[input.sacn]`) starts at the word `console`.
+        let end = m
+            .args
+            .iter()
+            .position(|a| *a == OscType::String("console".into()))
+            .unwrap_or(m.args.len());
+        let a = &m.args[..end];
         assert!(
             a.len() >= 12 && (a.len() - 12).is_multiple_of(2),
             "/vo/status: 9 session arguments, fps, late, errors, then (destination, errors) pairs: {a:?}"

@@ -1,5 +1,6 @@
 //! Art-Net 4 and E1.31 packets decoded from the specifications' byte offsets, independently
-//! of the sending code. Malformed packets fail the test that receives them.
+//! of the sending code. Malformed packets fail the test that receives them. Also an E1.31
+//! encoder written from the same offsets, for test peers that play a console.
 
 /// ACN packet identifier (E1.31-2018 Table 4-1, octets 4-15).
 pub const ACN_ID: &[u8; 12] = b"ASC-E1.17\0\0\0";
@@ -113,4 +114,51 @@ pub fn parse_artnet(p: &[u8]) -> ArtDmx {
         port_address: u16::from_le_bytes([p[14], p[15]]),
         dmx: p[18..].to_vec(),
     }
+}
+
+/// Option bits of an E1.31 data packet (Table 6-1, octet 112).
+pub const PREVIEW_DATA: u8 = 0x80;
+pub const STREAM_TERMINATED: u8 = 0x40;
+
+/// Encodes an E1.31 data packet from the standard's octets (Table 4-1), for a test peer
+/// playing a console: `slots` after the start code (0..=512 of them).
+#[allow(clippy::too_many_arguments)]
+pub fn encode_sacn(
+    cid: [u8; 16],
+    source_name: &str,
+    priority: u8,
+    sequence: u8,
+    options: u8,
+    universe: u16,
+    start_code: u8,
+    slots: &[u8],
+) -> Vec<u8> {
+    assert!(slots.len() <= 512 && source_name.len() < 64);
+    let count = slots.len() + 1;
+    let mut p = Vec::with_capacity(125 + count);
+    p.extend_from_slice(&[0x00, 0x10, 0x00, 0x00]); // preamble, postamble size
+    p.extend_from_slice(ACN_ID);
+    let flags_len = |len: usize| (0x7000 | len as u16).to_be_bytes();
+    p.extend_from_slice(&flags_len(125 + count - 16)); // root layer
+    p.extend_from_slice(&[0, 0, 0, 4]); // VECTOR_ROOT_E131_DATA
+    p.extend_from_slice(&cid);
+    p.extend_from_slice(&flags_len(125 + count - 38)); // framing layer
+    p.extend_from_slice(&[0, 0, 0, 2]); // VECTOR_E131_DATA_PACKET
+    let mut name = [0u8; 64];
+    name[..source_name.len()].copy_from_slice(source_name.as_bytes());
+    p.extend_from_slice(&name);
+    p.push(priority);
+    p.extend_from_slice(&[0, 0]); // synchronization address: none
+    p.push(sequence);
+    p.push(options);
+    p.extend_from_slice(&universe.to_be_bytes());
+    p.extend_from_slice(&flags_len(125 + count - 115)); // DMP layer
+    p.push(0x02); // VECTOR_DMP_SET_PROPERTY
+    p.push(0xa1); // address type and data type
+    p.extend_from_slice(&[0, 0, 0, 1]); // first property address 0, increment 1
+    p.extend_from_slice(&(count as u16).to_be_bytes());
+    p.push(start_code);
+    p.extend_from_slice(slots);
+    assert_eq!(p.len(), 125 + count);
+    p
 }

@@ -1,4 +1,5 @@
-//! The `[output]` section of the config file (docs/config.md), with its defaults and checks.
+//! The `[output]` and `[input]` sections of the config file (docs/config.md), with their
+//! defaults and checks.
 
 use std::net::{IpAddr, Ipv4Addr, SocketAddr};
 
@@ -203,6 +204,83 @@ impl OutputConfig {
     }
 }
 
+/// The `[input]` section: what visobjd listens to (docs/config.md).
+#[derive(Debug, Clone, PartialEq, Default, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct InputConfig {
+    /// The console's sACN (`[input.sacn]`); absent: no input.
+    pub sacn: Option<SacnInput>,
+}
+
+/// `[input.sacn]`: the console's universes, received and merged as an E1.31 receiver does.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SacnInput {
+    /// `HOST:PORT` the receiver binds; multicast needs the wildcard address.
+    pub bind: String,
+    /// The universes received (1..=63999); packets of others are ignored.
+    pub universes: Vec<u16>,
+    /// An IPv4 address of the interface multicast groups are joined on; empty: unicast
+    /// only.
+    pub interface: String,
+}
+
+impl Default for SacnInput {
+    fn default() -> Self {
+        SacnInput {
+            bind: "0.0.0.0:5568".into(),
+            universes: Vec::new(),
+            interface: String::new(),
+        }
+    }
+}
+
+impl SacnInput {
+    /// The bind address, and the interface when multicast is on; `Err` names the key
+    /// (`input.sacn.bind: ...`), so a bad config is refused at load time.
+    pub fn addresses(&self) -> Result<(SocketAddr, Option<Ipv4Addr>), String> {
+        let bind: SocketAddr = self.bind.parse().map_err(|_| {
+            format!(
+                "input.sacn.bind: `{}` is not an address:port such as 0.0.0.0:5568",
+                self.bind
+            )
+        })?;
+        if self.universes.is_empty() {
+            return Err(
+                "input.sacn.universes: list the console's universes to receive, such as [1, 2]"
+                    .into(),
+            );
+        }
+        if let Some(u) = self.universes.iter().find(|u| !(1..=63999).contains(*u)) {
+            return Err(format!(
+                "input.sacn.universes: {u} is not an sACN universe (1..=63999)"
+            ));
+        }
+        let mut sorted = self.universes.clone();
+        sorted.sort_unstable();
+        if let Some(w) = sorted.windows(2).find(|w| w[0] == w[1]) {
+            return Err(format!("input.sacn.universes: {} is listed twice", w[0]));
+        }
+        if self.interface.is_empty() {
+            return Ok((bind, None));
+        }
+        let interface: Ipv4Addr = self.interface.parse().map_err(|_| {
+            format!(
+                "input.sacn.interface: `{}` is not an IPv4 address (the address of the interface multicast is joined on)",
+                self.interface
+            )
+        })?;
+        if bind.ip() != IpAddr::V4(Ipv4Addr::UNSPECIFIED) {
+            return Err(format!(
+                "input.sacn.bind: multicast (input.sacn.interface is set) needs bind = \"0.0.0.0:{}\": a socket bound to {} does not receive group traffic",
+                bind.port(),
+                bind.ip()
+            ));
+        }
+        Ok((bind, Some(interface)))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -256,5 +334,43 @@ mod tests {
             ..OutputConfig::default()
         };
         assert!(c.validate(&[1]).is_err());
+    }
+
+    #[test]
+    fn input_names_the_key() {
+        let c: InputConfig = toml::from_str("").expect("empty parses");
+        assert_eq!(c.sacn, None);
+        let ok: InputConfig =
+            toml::from_str("[sacn]\nbind = \"127.0.0.1:6000\"\nuniverses = [1, 2]\n")
+                .expect("parses");
+        let s = ok.sacn.expect("present");
+        assert_eq!(
+            s.addresses(),
+            Ok(("127.0.0.1:6000".parse().expect("addr"), None))
+        );
+        let bad = |text: &str| {
+            let c: InputConfig = toml::from_str(text).expect("parses");
+            c.sacn.expect("present").addresses().expect_err("refused")
+        };
+        assert!(bad("[sacn]\nbind = \"6000\"\nuniverses = [1]").contains("input.sacn.bind"));
+        assert!(bad("[sacn]\n").contains("input.sacn.universes"));
+        assert!(bad("[sacn]\nuniverses = [0]").contains("input.sacn.universes"));
+        assert!(bad("[sacn]\nuniverses = [64000]").contains("63999"));
+        assert!(bad("[sacn]\nuniverses = [3, 3]").contains("twice"));
+        assert!(
+            bad("[sacn]\nuniverses = [1]\ninterface = \"eth0\"").contains("input.sacn.interface")
+        );
+        assert!(
+            bad("[sacn]\nbind = \"127.0.0.1:5568\"\nuniverses = [1]\ninterface = \"127.0.0.1\"")
+                .contains("0.0.0.0")
+        );
+        assert!(toml::from_str::<InputConfig>("[sacn]\nport = 1").is_err());
+        let multicast: InputConfig =
+            toml::from_str("[sacn]\nuniverses = [1]\ninterface = \"10.0.0.5\"").expect("parses");
+        let (bind, interface) = multicast.sacn.expect("present").addresses().expect("valid");
+        assert_eq!(
+            (bind.port(), interface),
+            (5568, Some(Ipv4Addr::new(10, 0, 0, 5)))
+        );
     }
 }

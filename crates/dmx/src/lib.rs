@@ -10,12 +10,14 @@
 
 mod cid;
 mod config;
+pub mod input;
 pub mod patch;
 mod wire;
 
 pub use patch::{Frame, Patch};
 
-pub use config::{ArtnetDest, OutputConfig, SacnDest};
+pub use config::{ArtnetDest, InputConfig, OutputConfig, SacnDest, SacnInput};
+pub use input::Input;
 
 use std::collections::HashMap;
 use std::io;
@@ -418,9 +420,10 @@ fn deliver(
     }
 }
 
-/// Rate-limits send-error logging to one line per destination per 10 s.
+/// Rate-limits a kind of log line to one per 10 s (send errors per destination, malformed
+/// input packets), counting the ones left out.
 #[derive(Debug, Default)]
-struct Throttle {
+pub(crate) struct Throttle {
     last: Option<Instant>,
     suppressed: u64,
 }
@@ -428,20 +431,29 @@ struct Throttle {
 impl Throttle {
     const EVERY: Duration = Duration::from_secs(10);
 
-    fn error(&mut self, now: Instant, protocol: &str, to: SocketAddr, error: &str) {
+    /// `Some(lines left out since the last one)` when a line may be logged at `now`.
+    pub(crate) fn allow(&mut self, now: Instant) -> Option<u64> {
         match self.last {
-            Some(last) if now.duration_since(last) < Self::EVERY => self.suppressed += 1,
-            _ => {
-                tracing::warn!(
-                    protocol,
-                    destination = %to,
-                    error,
-                    suppressed = self.suppressed,
-                    "DMX send failed (further failures to this destination are logged at most every 10 s)"
-                );
-                self.last = Some(now);
-                self.suppressed = 0;
+            Some(last) if now.duration_since(last) < Self::EVERY => {
+                self.suppressed += 1;
+                None
             }
+            _ => {
+                self.last = Some(now);
+                Some(std::mem::take(&mut self.suppressed))
+            }
+        }
+    }
+
+    fn error(&mut self, now: Instant, protocol: &str, to: SocketAddr, error: &str) {
+        if let Some(suppressed) = self.allow(now) {
+            tracing::warn!(
+                protocol,
+                destination = %to,
+                error,
+                suppressed,
+                "DMX send failed (further failures to this destination are logged at most every 10 s)"
+            );
         }
     }
 }

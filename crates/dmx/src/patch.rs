@@ -7,6 +7,7 @@
 use visobjd_scene::Scene;
 use visobjd_scene::look::{Level, Look};
 use visobjd_scene::profile::Slot;
+use visobjd_scene::srgb::linear_to_srgb;
 
 /// Slots in a DMX universe.
 pub const SLOTS: usize = 512;
@@ -297,6 +298,40 @@ impl Patch {
     }
 }
 
+impl Patch {
+    /// The look the DMX in `bytes` (one 512-slot buffer per universe, in
+    /// [`Patch::universes`] order) shows: the inverse of [`Patch::unmastered`] then
+    /// [`Patch::quantise`], so a console's output can become a visobjd look. A light with a
+    /// dimmer: intensity is the dimmer, colour its emitters at full. Without one: intensity
+    /// is its largest emitter level and colour the emitters divided by it (white when
+    /// dark). A light without colour slots is white. Colours are sRGB, as looks keep them.
+    pub fn look(&self, bytes: &[[u8; SLOTS]]) -> Look {
+        let levels = self
+            .lights
+            .iter()
+            .map(|light| {
+                let (dimmer, full) = read(light, bytes);
+                let (intensity, linear) = match dimmer {
+                    Some(d) => (d, full),
+                    None => {
+                        let peak = full.iter().copied().fold(0.0f32, f32::max);
+                        if peak > 0.0 {
+                            (peak, full.map(|v| v / peak))
+                        } else {
+                            (0.0, [1.0; 3])
+                        }
+                    }
+                };
+                Level {
+                    intensity: unit(intensity),
+                    color: linear.map(|v| unit(linear_to_srgb(unit(v)))),
+                }
+            })
+            .collect();
+        Look { levels }
+    }
+}
+
 /// One light's DMX read back: its dimmer level if it has one, and its emitters summed to
 /// one linear colour (white as equal parts, amber and lime as [`AMBER`] and [`LIME`], CMY
 /// flags as `1 - level`, white where the light has no colour slots). A missing universe
@@ -566,5 +601,82 @@ mod tests {
         let scene = scene();
         let patch = Patch::new(&scene);
         assert!(patch.multipliers(&[]).iter().all(|v| *v == [0.0; 3]));
+    }
+
+    #[test]
+    fn dmx_to_look_to_dmx_is_the_same_dmx_within_a_step_for_every_profile() {
+        let scene = scene();
+        let patch = Patch::new(&scene);
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        for name in visobjd_scene::profile::Profile::built_in_names() {
+            assert!(
+                (0..scene.lights.len()).any(|i| scene.profile(i).name == name),
+                "the test scene lacks the built-in profile {name}"
+            );
+        }
+        for round in 0..300 {
+            let levels = (0..scene.lights.len())
+                .map(|_| {
+                    let mut color = [next(), next(), next()];
+                    color[round % 3] = 1.0;
+                    // Dark lights and black colours too.
+                    let intensity = if round % 7 == 0 { 0.0 } else { next() };
+                    if round % 11 == 0 {
+                        color = [0.0; 3];
+                    }
+                    Level { intensity, color }
+                })
+                .collect();
+            let sent = patch.quantise(&patch.unmastered(&Look { levels }));
+            let read = patch.look(&sent);
+            assert!(
+                read.levels
+                    .iter()
+                    .all(|l| (0.0..=1.0).contains(&l.intensity)
+                        && l.color.iter().all(|c| (0.0..=1.0).contains(c)))
+            );
+            let again = patch.quantise(&patch.unmastered(&read));
+            for (u, (a, b)) in sent.iter().zip(&again).enumerate() {
+                for (slot, (x, y)) in a.iter().zip(b).enumerate() {
+                    assert!(
+                        x.abs_diff(*y) <= 1,
+                        "round {round}, universe index {u} slot {}: {x} became {y}",
+                        slot + 1
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn dmx_reads_as_intensity_and_colour() {
+        let scene = scene();
+        let patch = Patch::new(&scene);
+        let mut bytes = [[0u8; SLOTS]; 2];
+        bytes[0][0] = 128; // dimmer
+        bytes[0][20..23].copy_from_slice(&[255, 55, 0]); // rgb: full red, linear 0.214 green
+        bytes[0][30..34].copy_from_slice(&[51, 255, 0, 0]); // irgb at 20%, red
+        let look = patch.look(&bytes);
+        let l = &look.levels;
+        assert!((l[0].intensity - 128.0 / 255.0).abs() < 1e-6 && l[0].color == [1.0; 3]);
+        assert!((l[2].intensity - 1.0).abs() < 1e-6);
+        assert!(
+            (l[2].color[1] - 0.5).abs() < 0.01,
+            "sRGB 0.5 is linear 0.214: {:?}",
+            l[2]
+        );
+        assert_eq!((l[3].intensity, l[3].color), (0.2, [1.0, 0.0, 0.0]));
+        assert_eq!(
+            (l[4].intensity, l[4].color),
+            (0.0, [1.0; 3]),
+            "dark rgbw is white at 0"
+        );
+        assert_eq!(l[8].intensity, 0.0, "universe 3 is missing: dark");
     }
 }
