@@ -105,7 +105,8 @@ impl GdtfType {
             .collect();
         let mut modes = Vec::new();
         for m in ft.descendants().filter(|n| n.has_tag_name("DMXMode")) {
-            let name = attr(m, "Name");
+            // As written: MVR's GDTFMode names it exactly.
+            let name = m.attribute("Name").unwrap_or("").to_string();
             let mut channels = Vec::new();
             for c in m.descendants().filter(|n| n.has_tag_name("DMXChannel")) {
                 let bad = |what: String| RigError::new(file, Some(format!("mode `{name}`")), what);
@@ -197,20 +198,22 @@ impl GdtfType {
 
     /// The mode called `mode` as a fixture type, or an error naming the modes there are.
     pub fn fixture_type(&self, mode: &str) -> Result<FixtureType, RigError> {
-        let m = self.modes.iter().find(|m| m.name == mode).ok_or_else(|| {
-            RigError::new(
-                &self.file,
-                Some(format!("{} {}", self.manufacturer, self.name)),
-                format!(
-                    "has no DMX mode `{mode}` (modes: {})",
-                    self.modes
-                        .iter()
-                        .map(|m| format!("`{}`", m.name))
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                ),
-            )
-        })?;
+        let m = (self.modes.iter().find(|m| m.name == mode))
+            .or_else(|| self.modes.iter().find(|m| m.name.trim() == mode.trim()))
+            .ok_or_else(|| {
+                RigError::new(
+                    &self.file,
+                    Some(format!("{} {}", self.manufacturer, self.name)),
+                    format!(
+                        "has no DMX mode `{mode}` (modes: {})",
+                        self.modes
+                            .iter()
+                            .map(|m| format!("`{}`", m.name))
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
+                )
+            })?;
         let name = format!("{} {} ({})", self.manufacturer, self.name, m.name)
             .trim()
             .to_string();
