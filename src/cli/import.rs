@@ -259,9 +259,10 @@ fn import_types(file: &str, types: &[FixtureType], out: Option<&Path>) -> anyhow
     for t in types {
         match &t.profile {
             Ok(p) => println!(
-                "profile \"{}\": {} slots: {}",
+                "profile \"{}\": {} slot{}: {}",
                 t.name,
                 p.footprint(),
+                if p.footprint() == 1 { "" } else { "s" },
                 p.channel_names().join(", ")
             ),
             Err(why) => println!(

@@ -118,7 +118,7 @@ impl GdtfType {
                             v.trim()
                                 .parse::<usize>()
                                 .ok()
-                                .filter(|&v| v >= 1 && v <= 512)
+                                .filter(|v| (1..=512).contains(v))
                         })
                         .collect::<Option<Vec<_>>>()
                         .filter(|v| !v.is_empty() && v.len() <= 4)

@@ -239,17 +239,19 @@ impl Library {
         Ok(())
     }
 
-    /// A fixture type by name (GDTF `Manufacturer Name`/`Name`/`LongName`, or OFL `name`,
-    /// case-insensitive) and mode name: what a console patch names.
-    pub fn find(&self, type_name: &str, mode: &str) -> Option<FixtureType> {
+    /// A fixture type by name (GDTF `Manufacturer Name`, `Name` or `LongName`, or OFL
+    /// `name`, case-insensitive) in the mode called `mode`: what a console patch names.
+    /// `None` when no file has the type (the fixture needs a profile); an error when the
+    /// type is there without that mode.
+    pub fn find(&self, type_name: &str, mode: &str) -> Option<Result<FixtureType, RigError>> {
         let eq = |a: &str| a.trim().eq_ignore_ascii_case(type_name.trim());
         if let Some((_, t)) = self.gdtf.iter().find(|(_, t)| {
             eq(&t.name) || eq(&t.long_name) || eq(&format!("{} {}", t.manufacturer, t.name))
         }) {
-            return t.fixture_type(mode).ok();
+            return Some(t.fixture_type(mode));
         }
         let (_, t) = self.ofl.iter().find(|(_, t)| eq(&t.name))?;
-        t.fixture_type(mode).ok()
+        Some(t.fixture_type(mode))
     }
 }
 

@@ -264,3 +264,26 @@ fn mvr_basic_fixture_without_an_id_is_not_a_light() {
         ["fixture \"LED PAR 64 RGBW\": no numeric FixtureID (`0`), so no channel"]
     );
 }
+
+#[test]
+fn a_library_finds_types_by_the_names_a_console_patch_uses() {
+    let mut library = visobjd_rig::Library::default();
+    let (name, bytes) = read("BlenderDMX@LED_PAR_64_RGBW@v0.3.gdtf");
+    library.add_gdtf(&name, &bytes).expect("gdtf");
+    let (name, bytes) = read("etc-source-four-led-series-2-lustr.json");
+    library.add_ofl(&name, &bytes).expect("ofl");
+    let par = library.find("blenderdmx led par 64 rgbw", "Default");
+    assert_eq!(par.expect("known").expect("mode").footprint, Some(5));
+    // LongName="LED PAR 64 RGBW" works as well.
+    assert!(library.find("LED PAR 64 RGBW", "Default").is_some());
+    let lustr = library.find("Source Four LED Series 2 Lustr", "Direct");
+    assert_eq!(lustr.expect("known").expect("mode").footprint, Some(10));
+    let e = library.find("Source Four LED Series 2 Lustr", "Nope");
+    assert!(e.expect("known type").is_err());
+    assert!(library.find("Acme Wash 7", "Default").is_none());
+    let (name, bytes) = read("cameo-root-par-6.json");
+    assert!(
+        library.add_gdtf(&name, &bytes).is_err(),
+        "JSON is not a GDTF"
+    );
+}
