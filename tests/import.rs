@@ -289,6 +289,22 @@ fn a_reimport_keeps_what_the_scene_added() {
     let config = ready_for_check(&dir, &scene);
     stdout(&run(&["check", "--config", s(&config)]));
 
+    // A plot that moves a fixture onto the kept practical's slots: refused, naming both.
+    let before = std::fs::read(scene.join("scene.toml")).expect("read");
+    write_mvr(&mvr, &fixture("Moved", "12", None, "Default", "3.1"));
+    fails_with(
+        &run(&["import", s(&mvr), "--out", s(&scene)]),
+        &[
+            "lights 12 and 99 both use universe 3 slot 1",
+            "--prune drops them",
+        ],
+    );
+    assert_eq!(
+        std::fs::read(scene.join("scene.toml")).expect("read"),
+        before
+    );
+    write_mvr(&mvr, &changed);
+
     // --prune drops the lights the plot does not have, and the profile only they used.
     let out = stdout(&run(&["import", s(&mvr), "--out", s(&scene), "--prune"]));
     assert!(

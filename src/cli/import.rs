@@ -111,7 +111,16 @@ fn import_rig(file: &str, rig: &Rig, out: &Path, prune: bool) -> anyhow::Result<
             }
         );
     }
-    let path = write(out, &scene.file)?;
+    let path = write(out, &scene.file).map_err(|e| {
+        if scene.kept.is_empty() {
+            e
+        } else {
+            anyhow::anyhow!(
+                "{e:#} (the scene's lights the source does not have are kept: {}; --prune drops them)",
+                visobjd_rig::channel_list(&scene.kept)
+            )
+        }
+    })?;
     println!(
         "import: {} lights from {file} ({} new), {} profiles -> {}",
         scene.imported,
@@ -162,7 +171,8 @@ struct Merged {
 /// The scene `rig` makes, merged into `old`: the source decides each light's name, patch,
 /// profile and (where it has one) group; the scene keeps its name, exposure, every basis
 /// path, the groups given in visobjd to lights whose source has none, and (unless
-/// `prune`) the lights the source does not have.
+/// `prune`) the lights the source does not make (absent, or of a type that needs a
+/// profile).
 fn merge(file: &str, rig: &Rig, old: Option<&SceneFile>, prune: bool) -> Merged {
     let empty = SceneFile::default();
     let old = old.unwrap_or(&empty);
@@ -202,7 +212,8 @@ fn merge(file: &str, rig: &Rig, old: Option<&SceneFile>, prune: bool) -> Merged 
         });
     }
     let imported = lights.len();
-    let from_source: BTreeSet<u32> = rig.fixtures.iter().map(|f| f.channel).collect();
+    // A light whose fixture type needs a profile stays as the scene has it.
+    let from_source: BTreeSet<u32> = lights.iter().map(|l| l.channel).collect();
     let (mut kept, mut dropped) = (Vec::new(), Vec::new());
     for l in old
         .light
