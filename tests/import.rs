@@ -512,3 +512,99 @@ else:
     }
     assert_eq!(ours, python("gdtf", &path));
 }
+
+/// The demo's patch as an MVR (`scenes/demo/demo.mvr`, written by the independent
+/// exporter `tests/peers/export_mvr.py` from `scenes/demo/scene.toml`) imports back as the
+/// same patch: every light's channel, name, group, universe, address and profile, and the
+/// same DMX bytes for the same looks.
+#[test]
+fn the_demo_rig_round_trips_through_mvr() {
+    use visobjd_scene::Scene;
+    use visobjd_scene::look::{Level, Look};
+
+    let ready = Command::new("python3")
+        .args(["-c", "import tomllib, zipfile"])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !ready {
+        tools::missing(
+            "python3 (3.11 or later)",
+            "is not installed",
+            "apt-get install python3",
+        );
+        return;
+    }
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let demo = root.join("scenes/demo");
+    let dir = temp_dir("import-demo");
+
+    // The shipped MVR is what the exporter writes from the demo's scene.toml today.
+    let fresh = dir.join("demo.mvr");
+    let out = Command::new("python3")
+        .arg(root.join("tests/peers/export_mvr.py"))
+        .args([s(&demo.join("scene.toml")), s(&fresh)])
+        .output()
+        .expect("python3");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let entries = |path: &Path| -> Vec<(String, Vec<u8>)> {
+        let mut zip = zip::ZipArchive::new(std::fs::File::open(path).expect("open")).expect("zip");
+        (0..zip.len())
+            .map(|i| {
+                let mut e = zip.by_index(i).expect("entry");
+                let mut bytes = Vec::new();
+                std::io::Read::read_to_end(&mut e, &mut bytes).expect("read");
+                (e.name().expect("entry name").to_string(), bytes)
+            })
+            .collect()
+    };
+    let shipped = demo.join("demo.mvr");
+    assert!(
+        entries(&fresh) == entries(&shipped),
+        "scenes/demo/demo.mvr is stale: python3 tests/peers/export_mvr.py scenes/demo/scene.toml scenes/demo/demo.mvr"
+    );
+
+    let scene_dir = dir.join("scene");
+    let out = stdout(&run(&["import", s(&shipped), "--out", s(&scene_dir)]));
+    assert!(out.contains("import: 44 lights"), "{out}");
+    let original = Scene::load(&demo).expect("demo scene");
+    let imported = Scene::load(&scene_dir).expect("imported scene");
+    assert_eq!(original.lights.len(), imported.lights.len());
+    for (i, (a, b)) in original.lights.iter().zip(&imported.lights).enumerate() {
+        assert_eq!(
+            (a.channel, &a.name, a.universe, a.address),
+            (b.channel, &b.name, b.universe, b.address)
+        );
+        assert_eq!(original.groups[a.group].name, imported.groups[b.group].name);
+        let (pa, pb) = (original.profile(i), imported.profile(i));
+        assert_eq!(
+            (&pa.slots, &pa.emitters),
+            (&pb.slots, &pb.emitters),
+            "light {}",
+            a.channel
+        );
+        assert_eq!(pb.name, format!("visobjd {} (Default)", pa.name));
+    }
+    let (pa, pb) = (
+        visobjd_dmx::Patch::new(&original),
+        visobjd_dmx::Patch::new(&imported),
+    );
+    assert_eq!(pa.universes(), pb.universes());
+    for k in 0..4 {
+        let look = Look {
+            levels: (0..original.lights.len())
+                .map(|i| Level {
+                    intensity: ((i + k) % 5) as f32 / 4.0,
+                    color: [1.0, ((i * 3 + k) % 7) as f32 / 6.0, (k % 2) as f32],
+                })
+                .collect(),
+        };
+        assert_eq!(
+            pa.quantise(&pa.levels(&look, 1.0)),
+            pb.quantise(&pb.levels(&look, 1.0))
+        );
+    }
+}
