@@ -373,6 +373,29 @@ fn wrong_input_is_one_line_naming_the_file_and_the_fixture_and_changes_nothing()
         );
     }
 
+    // A GDTF inside the plot that is not a zip.
+    let mut zip = zip::ZipWriter::new(std::fs::File::create(&bad).expect("create"));
+    let opts = zip::write::SimpleFileOptions::default();
+    zip.start_file("GeneralSceneDescription.xml", opts)
+        .expect("entry");
+    zip.write_all(
+        format!(
+            r#"<GeneralSceneDescription verMajor="1" verMinor="6"><Scene><Layers><Layer name="L"><ChildList>{}</ChildList></Layer></Layers></Scene></GeneralSceneDescription>"#,
+            fixture("FOH 1", "1", None, "Default", "1")
+        )
+        .as_bytes(),
+    )
+    .expect("write");
+    zip.start_file(PAR, opts).expect("entry");
+    zip.write_all(b"not a zip").expect("write");
+    zip.finish().expect("finish");
+    fails_with(
+        &run(&["import", s(&bad), "--out", s(&scene)]),
+        &[&format!(
+            "{plot_file}: fixture \"FOH 1\": its GDTF {PAR}: not a readable zip"
+        )],
+    );
+
     // A broken zip (the plot cut short), and the real but truncated GDTF.
     let good = std::fs::read(&mvr).expect("mvr");
     std::fs::write(&bad, &good[..good.len() / 2]).expect("write");

@@ -78,7 +78,8 @@ pub fn parse(file: &str, bytes: &[u8]) -> Result<Rig, RigError> {
                         )
                     })?;
                 let gdtf = crate::zip_entry(file, &mut archive, &entry)?;
-                let ty = GdtfType::parse(&format!("{file}: {entry}"), &gdtf)?;
+                let ty = GdtfType::parse(&entry, &gdtf)
+                    .map_err(|e| RigError::new(file, who.clone(), format!("its GDTF {e}")))?;
                 types.insert(f.spec.clone(), ty);
             }
             let ty = &types[&f.spec];

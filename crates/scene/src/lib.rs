@@ -401,3 +401,43 @@ pub fn describe_toml_error(text: &str, e: &toml::de::Error) -> String {
         None => msg,
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const LIGHT: &str =
+        "[[light]]\nchannel = 1\nbasis = \"b.exr\"\nprofile = \"p\"\nuniverse = 1\naddress = 1\n";
+
+    #[test]
+    fn profile_emitters_parse_and_bad_ones_name_the_file() {
+        let text = format!(
+            "{LIGHT}[[profile]]\nname = \"p\"\nchannels = [\"intensity\", \"red\", \"emitter:teal\"]\n[[profile.emitter]]\nname = \"teal\"\nxy = [0.1, 0.5]\nflux = 0.2\n"
+        );
+        let scene = Scene::parse(Path::new("/s"), &text).expect("parses");
+        let p = scene.profile(0);
+        assert_eq!(p.emitters.len(), 2);
+        assert_eq!((p.emitters[1].xy, p.emitters[1].flux), ([0.1, 0.5], 0.2));
+        // Written back, it reads the same.
+        let file = SceneFile::parse(Path::new("/s/scene.toml"), &text).expect("file");
+        let again = file.to_toml().expect("toml");
+        let scene2 = Scene::parse(Path::new("/s"), &again).expect("parses again");
+        assert_eq!(scene2.profile(0), p);
+
+        let missing = format!("{LIGHT}[[profile]]\nname = \"p\"\nchannels = [\"emitter:teal\"]\n");
+        let e = Scene::parse(Path::new("/s"), &missing)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("/s/scene.toml: profile `p`: emitter `teal` needs a CIE xy"),
+            "{e}"
+        );
+        let unknown_key = format!(
+            "{LIGHT}[[profile]]\nname = \"p\"\nchannels = [\"red\"]\n[[profile.emitter]]\nname = \"red\"\ncolour = 1\n"
+        );
+        let e = Scene::parse(Path::new("/s"), &unknown_key)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("unknown field `colour`"), "{e}");
+    }
+}
