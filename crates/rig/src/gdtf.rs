@@ -8,7 +8,7 @@
 //! the DMXValue type: `v/n` is `v` in `n` bytes, mirrored to the channel's resolution;
 //! `v/ns` is shifted).
 
-use visobjd_scene::profile::{EmitterFile, Profile, ProfileFile};
+use visobjd_scene::profile::{DEFAULT_EMITTERS, EmitterFile, Profile, ProfileFile};
 
 use crate::{FixtureType, RigError};
 
@@ -260,6 +260,7 @@ impl GdtfType {
         // Per slot: its name, or "" for the fine byte an intensity16 takes.
         let mut slots: Vec<Option<String>> = vec![None; footprint];
         let mut emitters: Vec<EmitterFile> = Vec::new();
+        let mut additive: Vec<&str> = Vec::new();
         for c in &mode.channels {
             let mut names: Vec<String> = match colour_slot(&c.attribute) {
                 Some("intensity") if c.offsets.len() >= 2 && c.offsets[1] == c.offsets[0] + 1 => {
@@ -284,6 +285,7 @@ impl GdtfType {
                 slots[o - 1] = Some(n);
             }
             if let Some(slot) = colour_slot(&c.attribute).filter(|s| is_emitter(s)) {
+                additive.push(slot.trim_start_matches("emitter:"));
                 let gdtf = c
                     .emitter
                     .as_deref()
@@ -304,6 +306,7 @@ impl GdtfType {
                 }
             }
         }
+        scale_defaults(&additive, &mut emitters);
         let channels: Vec<String> = slots
             .into_iter()
             .filter(|s| s.as_deref() != Some(""))
@@ -351,6 +354,41 @@ fn colour_slot(attribute: &str) -> Option<&'static str> {
         "ColorSub_Y" => "yellow",
         _ => return None,
     })
+}
+
+/// Puts the default emitters of a mode on the scale of the GDTF's Y values where the
+/// GDTF describes some of its emitters and not others: the defaults' flux is multiplied by
+/// (sum of the described emitters' Y) / (sum of their default fluxes), so every flux stays
+/// relative to the same whole.
+fn scale_defaults(additive: &[&str], given: &mut Vec<EmitterFile>) {
+    let default = |name: &str| {
+        DEFAULT_EMITTERS
+            .iter()
+            .find(|(n, _, _)| *n == name)
+            .map(|(_, _, f)| *f)
+    };
+    let (mut sum_given, mut sum_default) = (0.0, 0.0);
+    for e in given.iter() {
+        if let (Some(f), Some(d)) = (e.flux, default(&e.name)) {
+            sum_given += f;
+            sum_default += d;
+        }
+    }
+    if sum_default <= 0.0 {
+        return;
+    }
+    let k = sum_given / sum_default;
+    for name in additive {
+        if !given.iter().any(|e| e.name == *name)
+            && let Some(d) = default(name)
+        {
+            given.push(EmitterFile {
+                name: (*name).to_string(),
+                xy: None,
+                flux: Some(d * k),
+            });
+        }
+    }
 }
 
 /// Whether a slot name is an additive emitter (and so may take a GDTF emitter's colour).
@@ -426,6 +464,32 @@ fn parse_xyy(text: &str) -> Option<[f64; 3]> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn undescribed_emitters_take_the_scale_of_the_described_ones() {
+        // Red and green described at 10x their default flux: blue follows at 10x.
+        let mut given = vec![
+            EmitterFile {
+                name: "red".into(),
+                xy: Some([0.7, 0.3]),
+                flux: Some(2.126),
+            },
+            EmitterFile {
+                name: "green".into(),
+                xy: Some([0.2, 0.7]),
+                flux: Some(7.152),
+            },
+        ];
+        scale_defaults(&["red", "green", "blue", "teal"], &mut given);
+        assert_eq!(given.len(), 3, "teal has no default to scale");
+        assert_eq!(given[2].name, "blue");
+        assert!((given[2].flux.expect("flux") - 0.722).abs() < 1e-9);
+        assert_eq!(given[2].xy, None);
+        // Nothing described: the defaults stay as they are.
+        let mut none = Vec::new();
+        scale_defaults(&["red"], &mut none);
+        assert!(none.is_empty());
+    }
 
     #[test]
     fn dmx_values_convert_as_the_spec_says() {
