@@ -4,6 +4,7 @@ mod bench;
 mod capture;
 mod check;
 mod gallery;
+mod import;
 mod logs;
 mod render;
 mod run;
@@ -47,6 +48,8 @@ enum Command {
     Bench(bench::Args),
     /// Shoots the scene's basis images light by light with a tethered camera.
     Capture(capture::Args),
+    /// Builds or updates a scene from an MVR plot, or lists a GDTF/OFL fixture type's modes as profiles.
+    Import(import::Args),
 }
 
 /// Starts rayon's global pool, which renders and generates run on, with its threads named
@@ -125,6 +128,7 @@ pub fn main() -> std::process::ExitCode {
         Command::Touchosc(args) => touchosc::run(args),
         Command::Bench(args) => bench::run(args),
         Command::Capture(args) => capture::run(args),
+        Command::Import(args) => import::run(args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

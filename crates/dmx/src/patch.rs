@@ -126,6 +126,7 @@ impl Patch {
                     | Slot::White
                     | Slot::Amber
                     | Slot::Lime
+                    | Slot::Emitter(_)
                         if !has_intensity =>
                     {
                         Rule::Scale
@@ -229,6 +230,9 @@ impl Patch {
                     Slot::White => white,
                     Slot::Amber => amber,
                     Slot::Lime => lime,
+                    // An emitter beyond the six named ones stays dark until the colour
+                    // solver (which mixes with `Profile::emitters_xyz`) sets its level.
+                    Slot::Emitter(_) => 0.0,
                     Slot::Uv => 0.0,
                     Slot::Cyan => 1.0 - folded[0],
                     Slot::Magenta => 1.0 - folded[1],

@@ -12,9 +12,9 @@ pub mod srgb;
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 
-use crate::profile::Profile;
+use crate::profile::{Profile, ProfileFile};
 
 /// Why a scene did not load; each message names the file and the problem.
 #[derive(Debug, thiserror::Error)]
@@ -53,43 +53,75 @@ pub enum SceneError {
     },
 }
 
-#[derive(Deserialize)]
+/// scene.toml as written: what `Scene::parse` validates and what an importer writes, so
+/// a re-import can keep every key a person or a capture set.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct SceneFile {
-    name: Option<String>,
+pub struct SceneFile {
+    /// The scene's name.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub name: Option<String>,
+    /// Preview exposure in stops.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub exposure: f32,
+    /// `[[group]]` tables.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub group: Vec<GroupFile>,
+    /// `[[light]]` tables.
     #[serde(default)]
-    exposure: f32,
-    #[serde(default)]
-    group: Vec<GroupFile>,
-    #[serde(default)]
-    light: Vec<LightFile>,
-    #[serde(default)]
-    profile: Vec<ProfileFile>,
+    pub light: Vec<LightFile>,
+    /// `[[profile]]` tables.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub profile: Vec<ProfileFile>,
 }
 
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct GroupFile {
-    name: String,
+fn is_zero(v: &f32) -> bool {
+    *v == 0.0
 }
 
-#[derive(Deserialize)]
+/// A `[[group]]` table.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct LightFile {
-    channel: u32,
-    name: Option<String>,
-    group: Option<String>,
-    basis: String,
-    profile: String,
-    universe: u16,
-    address: u16,
+pub struct GroupFile {
+    /// The group's name.
+    pub name: String,
 }
 
-#[derive(Deserialize)]
+/// A `[[light]]` table.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct ProfileFile {
-    name: String,
-    channels: Vec<String>,
+pub struct LightFile {
+    /// Console channel.
+    pub channel: u32,
+    /// Display name.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub name: Option<String>,
+    /// A declared group.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub group: Option<String>,
+    /// Basis image path, relative to the scene folder.
+    pub basis: String,
+    /// Built-in or `[[profile]]` name.
+    pub profile: String,
+    /// sACN universe.
+    pub universe: u16,
+    /// DMX start address.
+    pub address: u16,
+}
+
+impl SceneFile {
+    /// Parses scene.toml text without validating it (`path` names the file in errors).
+    pub fn parse(path: &Path, text: &str) -> Result<SceneFile, SceneError> {
+        toml::from_str(text).map_err(|e| SceneError::Parse {
+            path: path.to_path_buf(),
+            message: describe_toml_error(text, &e),
+        })
+    }
+
+    /// The TOML text of this file.
+    pub fn to_toml(&self) -> Result<String, String> {
+        toml::to_string(self).map_err(|e| e.to_string())
+    }
 }
 
 /// One light of the rig.
@@ -155,10 +187,7 @@ impl Scene {
             path: path.clone(),
             message,
         };
-        let file: SceneFile = toml::from_str(text).map_err(|e| SceneError::Parse {
-            path: path.clone(),
-            message: describe_toml_error(text, &e),
-        })?;
+        let file = SceneFile::parse(&path, text)?;
         if file.light.is_empty() {
             return Err(invalid("the scene has no [[light]]".into()));
         }
@@ -175,7 +204,7 @@ impl Scene {
             if Profile::built_in(&p.name).is_some() || custom.contains_key(&p.name) {
                 return Err(invalid(format!("profile `{}` is defined twice", p.name)));
             }
-            let profile = Profile::custom(&p.name, &p.channels).map_err(invalid)?;
+            let profile = Profile::from_file(p).map_err(invalid)?;
             if profile.footprint() > 512 {
                 return Err(invalid(format!(
                     "profile `{}` is wider than a universe",
@@ -371,5 +400,45 @@ pub fn describe_toml_error(text: &str, e: &toml::de::Error) -> String {
             format!("line {line}, column {column}: {msg}")
         }
         None => msg,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const LIGHT: &str =
+        "[[light]]\nchannel = 1\nbasis = \"b.exr\"\nprofile = \"p\"\nuniverse = 1\naddress = 1\n";
+
+    #[test]
+    fn profile_emitters_parse_and_bad_ones_name_the_file() {
+        let text = format!(
+            "{LIGHT}[[profile]]\nname = \"p\"\nchannels = [\"intensity\", \"red\", \"emitter:teal\"]\n[[profile.emitter]]\nname = \"teal\"\nxy = [0.1, 0.5]\nflux = 0.2\n"
+        );
+        let scene = Scene::parse(Path::new("/s"), &text).expect("parses");
+        let p = scene.profile(0);
+        assert_eq!(p.emitters.len(), 2);
+        assert_eq!((p.emitters[1].xy, p.emitters[1].flux), ([0.1, 0.5], 0.2));
+        // Written back, it reads the same.
+        let file = SceneFile::parse(Path::new("/s/scene.toml"), &text).expect("file");
+        let again = file.to_toml().expect("toml");
+        let scene2 = Scene::parse(Path::new("/s"), &again).expect("parses again");
+        assert_eq!(scene2.profile(0), p);
+
+        let missing = format!("{LIGHT}[[profile]]\nname = \"p\"\nchannels = [\"emitter:teal\"]\n");
+        let e = Scene::parse(Path::new("/s"), &missing)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("/s/scene.toml: profile `p`: emitter `teal` needs a CIE xy"),
+            "{e}"
+        );
+        let unknown_key = format!(
+            "{LIGHT}[[profile]]\nname = \"p\"\nchannels = [\"red\"]\n[[profile.emitter]]\nname = \"red\"\ncolour = 1\n"
+        );
+        let e = Scene::parse(Path::new("/s"), &unknown_key)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("unknown field `colour`"), "{e}");
     }
 }

@@ -1,0 +1,307 @@
+//! `visobjd import`: a scene from the rig as the lighting world describes it (an MVR plot
+//! with its GDTF fixture types), or a fixture type's modes as profiles (a GDTF file, an
+//! Open Fixture Library JSON file). The source's kind is told by its content; the parsing
+//! is the rig crate's. A re-import into an existing scene keeps what a person or a capture
+//! added (docs/cli.md, "What a re-import keeps").
+
+use std::collections::BTreeSet;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, bail};
+use visobjd_rig::{FixtureType, Kind, Rig};
+use visobjd_scene::profile::ProfileFile;
+use visobjd_scene::{GroupFile, LightFile, Scene, SceneFile};
+
+/// Arguments of `import`.
+#[derive(clap::Args)]
+pub struct Args {
+    /// An MVR plot (`.mvr`), a GDTF fixture type (`.gdtf`) or an Open Fixture Library
+    /// fixture (`.json`); told apart by content.
+    source: String,
+    /// The scene folder to write, or to update when it has a scene.toml (required for an
+    /// MVR; for a fixture type, its profiles are added to that existing scene).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// A folder of GDTF or OFL files, for sources that only name fixture types (an Eos
+    /// patch: not supported yet).
+    #[arg(long)]
+    fixtures: Option<PathBuf>,
+    /// Drop the scene's lights that the source does not have (default: keep them).
+    #[arg(long)]
+    prune: bool,
+}
+
+/// Runs `import`.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    if args.source.starts_with("eos://") {
+        bail!(
+            "{}: importing from an Eos console is not supported yet",
+            args.source
+        );
+    }
+    if let Some(dir) = &args.fixtures {
+        bail!(
+            "--fixtures {}: a fixture library is for sources that only name fixture types (Eos CSV, eos://), which are not supported yet; MVR carries its GDTF files",
+            dir.display()
+        );
+    }
+    let path = PathBuf::from(&args.source);
+    let bytes =
+        std::fs::read(&path).with_context(|| format!("{}: cannot read it", path.display()))?;
+    let file = path.display().to_string();
+    match visobjd_rig::kind(&file, &bytes)? {
+        Kind::Mvr => {
+            let rig = visobjd_rig::mvr::parse(&file, &bytes)?;
+            let Some(out) = &args.out else {
+                bail!("{file}: an MVR becomes a scene: give --out SCENE_DIR");
+            };
+            import_rig(&file, &rig, out, args.prune)
+        }
+        Kind::Gdtf => {
+            let ty = visobjd_rig::gdtf::GdtfType::parse(&file, &bytes)?;
+            import_types(&file, &ty.fixture_types(), args.out.as_deref())
+        }
+        Kind::Ofl => {
+            let ty = visobjd_rig::ofl::OflType::parse(&file, &bytes)?;
+            import_types(&file, &ty.fixture_types(), args.out.as_deref())
+        }
+    }
+}
+
+/// The scene folder's scene.toml as written, if there is one.
+fn existing(out: &Path) -> anyhow::Result<Option<SceneFile>> {
+    let path = out.join("scene.toml");
+    match std::fs::read_to_string(&path) {
+        Ok(text) => Ok(Some(SceneFile::parse(&path, &text)?)),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
+        Err(e) => Err(anyhow::anyhow!("{}: cannot read it: {e}", path.display())),
+    }
+}
+
+/// Validates `file` as a scene of `out` and writes it atomically.
+fn write(out: &Path, file: &SceneFile) -> anyhow::Result<PathBuf> {
+    let text = file.to_toml().map_err(anyhow::Error::msg)?;
+    Scene::parse(out, &text)?;
+    std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create it", out.display()))?;
+    let path = out.join("scene.toml");
+    visobjd_files::write_atomic(&path, text.as_bytes())
+        .with_context(|| format!("{}: cannot write it", path.display()))?;
+    Ok(path)
+}
+
+/// Where a new light's basis image goes: `basis/NNN.exr` by channel.
+fn basis_path(channel: u32) -> String {
+    format!("basis/{channel:03}.exr")
+}
+
+/// Builds or updates the scene in `out` from `rig`.
+fn import_rig(file: &str, rig: &Rig, out: &Path, prune: bool) -> anyhow::Result<()> {
+    let old = existing(out)?;
+    let scene = merge(file, rig, old.as_ref(), prune);
+    let lights = scene.file.light.len();
+    if lights == 0 {
+        let mut why = rig.needs_profiles();
+        why.extend(rig.skipped.iter().cloned());
+        bail!(
+            "{file}: no fixture became a light ({})",
+            if why.is_empty() {
+                "the plot has no fixtures".to_string()
+            } else {
+                why.join("; ")
+            }
+        );
+    }
+    let path = write(out, &scene.file).map_err(|e| {
+        if scene.kept.is_empty() {
+            e
+        } else {
+            anyhow::anyhow!(
+                "{e:#} (the scene's lights the source does not have are kept: {}; --prune drops them)",
+                visobjd_rig::channel_list(&scene.kept)
+            )
+        }
+    })?;
+    println!(
+        "import: {} lights from {file} ({} new), {} profiles -> {}",
+        scene.imported,
+        scene.new.len(),
+        scene.file.profile.len(),
+        path.display()
+    );
+    if !scene.new.is_empty() {
+        println!(
+            "basis images to capture: {}",
+            visobjd_rig::channel_list(&scene.new)
+        );
+    }
+    if !scene.kept.is_empty() {
+        println!(
+            "kept, not in the source: {} (--prune drops them)",
+            visobjd_rig::channel_list(&scene.kept)
+        );
+    }
+    if !scene.dropped.is_empty() {
+        println!(
+            "dropped, not in the source: {}",
+            visobjd_rig::channel_list(&scene.dropped)
+        );
+    }
+    for s in &rig.skipped {
+        println!("not a light: {s}");
+    }
+    for n in rig.needs_profiles() {
+        println!("{n}");
+    }
+    Ok(())
+}
+
+/// A merged scene and what the merge did.
+struct Merged {
+    file: SceneFile,
+    /// Lights that came from the source.
+    imported: usize,
+    /// Channels new to the scene (their basis images are still to be captured).
+    new: Vec<u32>,
+    /// Channels of the scene the source does not have, kept.
+    kept: Vec<u32>,
+    /// The same, dropped (`--prune`).
+    dropped: Vec<u32>,
+}
+
+/// The scene `rig` makes, merged into `old`: the source decides each light's name, patch,
+/// profile and (where it has one) group; the scene keeps its name, exposure, every basis
+/// path, the groups given in visobjd to lights whose source has none, and (unless
+/// `prune`) the lights the source does not make (absent, or of a type that needs a
+/// profile).
+fn merge(file: &str, rig: &Rig, old: Option<&SceneFile>, prune: bool) -> Merged {
+    let empty = SceneFile::default();
+    let old = old.unwrap_or(&empty);
+    let stem = Path::new(file)
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned());
+    let mut lights: Vec<LightFile> = Vec::new();
+    let mut profiles: Vec<ProfileFile> = Vec::new();
+    let mut new = Vec::new();
+    for f in &rig.fixtures {
+        let FixtureType {
+            profile: Ok(profile),
+            ..
+        } = &rig.types[f.fixture_type]
+        else {
+            continue;
+        };
+        if !profiles.iter().any(|p| p.name == profile.name) {
+            profiles.push(profile.to_file());
+        }
+        let before = old.light.iter().find(|l| l.channel == f.channel);
+        if before.is_none() {
+            new.push(f.channel);
+        }
+        lights.push(LightFile {
+            channel: f.channel,
+            name: Some(f.name.clone()).filter(|n| !n.is_empty()),
+            group: f
+                .group
+                .clone()
+                .filter(|g| !g.is_empty())
+                .or_else(|| before.and_then(|l| l.group.clone())),
+            basis: before.map_or_else(|| basis_path(f.channel), |l| l.basis.clone()),
+            profile: profile.name.clone(),
+            universe: f.universe,
+            address: f.address,
+        });
+    }
+    let imported = lights.len();
+    // A light whose fixture type needs a profile stays as the scene has it.
+    let from_source: BTreeSet<u32> = lights.iter().map(|l| l.channel).collect();
+    let (mut kept, mut dropped) = (Vec::new(), Vec::new());
+    for l in old
+        .light
+        .iter()
+        .filter(|l| !from_source.contains(&l.channel))
+    {
+        if prune {
+            dropped.push(l.channel);
+        } else {
+            kept.push(l.channel);
+            lights.push(l.clone());
+        }
+    }
+    lights.sort_by_key(|l| l.channel);
+    // The scene's own profiles stay where a kept light uses them and the source does not
+    // redefine them.
+    for p in &old.profile {
+        let used = lights.iter().any(|l| l.profile == p.name);
+        if used && !profiles.iter().any(|q| q.name == p.name) {
+            profiles.push(p.clone());
+        }
+    }
+    let used: BTreeSet<&str> = lights.iter().filter_map(|l| l.group.as_deref()).collect();
+    let mut groups: Vec<GroupFile> = old
+        .group
+        .iter()
+        .filter(|g| used.contains(g.name.as_str()))
+        .cloned()
+        .collect();
+    for l in &lights {
+        if let Some(g) = &l.group
+            && !groups.iter().any(|x| &x.name == g)
+        {
+            groups.push(GroupFile { name: g.clone() });
+        }
+    }
+    Merged {
+        file: SceneFile {
+            name: old.name.clone().or(stem),
+            exposure: old.exposure,
+            group: groups,
+            light: lights,
+            profile: profiles,
+        },
+        imported,
+        new,
+        kept,
+        dropped,
+    }
+}
+
+/// A fixture type's modes: printed as profiles, and added to the scene in `out` if given.
+fn import_types(file: &str, types: &[FixtureType], out: Option<&Path>) -> anyhow::Result<()> {
+    for t in types {
+        match &t.profile {
+            Ok(p) => println!(
+                "profile \"{}\": {} slot{}: {}",
+                t.name,
+                p.footprint(),
+                if p.footprint() == 1 { "" } else { "s" },
+                p.channel_names().join(", ")
+            ),
+            Err(why) => println!(
+                "needs a profile: {}{}: {why}",
+                t.name,
+                t.footprint
+                    .map_or(String::new(), |n| format!(" ({n} channels)"))
+            ),
+        }
+    }
+    let Some(out) = out else {
+        return Ok(());
+    };
+    let Some(mut scene) = existing(out)? else {
+        bail!(
+            "{}: there is no scene.toml to add {file}'s profiles to (a fixture type has no lights: import an MVR, or write the [[light]]s first)",
+            out.display()
+        );
+    };
+    let mut added = 0;
+    for t in types {
+        if let Ok(p) = &t.profile {
+            scene.profile.retain(|q| q.name != p.name);
+            scene.profile.push(p.to_file());
+            added += 1;
+        }
+    }
+    let path = write(out, &scene)?;
+    println!("import: {added} profiles from {file} -> {}", path.display());
+    Ok(())
+}
