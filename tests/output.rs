@@ -16,7 +16,10 @@ use visobjd_scene::look::{Level, Look};
 mod common;
 
 use common::tools;
-use common::wire::{ArtDmx, Sacn, parse_artnet, parse_sacn, parse_sync};
+use common::wire::{
+    ArtDmx, Sacn, encode_artpoll, encode_node_reply, parse_artnet, parse_discovery,
+    parse_pollreply, parse_sacn, parse_sync,
+};
 
 // ---- fixtures --------------------------------------------------------------------------
 
@@ -155,7 +158,7 @@ fn frames_are_continuous_and_sequenced() {
     let period = Duration::from_millis(100);
 
     let mut by_universe: BTreeMap<u16, Vec<(Instant, Sacn)>> = BTreeMap::new();
-    for (t, p) in &sacn {
+    for (t, p) in sacn.iter().filter(|(_, p)| parse_discovery(p).is_none()) {
         let s = parse_sacn(p).expect("only data packets without sync");
         assert_eq!(s.priority, 150);
         assert_eq!(s.source_name, "visobjd test");
@@ -432,6 +435,11 @@ fn tshark_decodes_every_packet() {
     }
     let mut rig = rig(44);
     rig.config.sacn[0].sync_universe = 7;
+    // A known address for the Art-Net socket, so the test can poll it.
+    let art_bind = UdpSocket::bind("127.0.0.1:0")
+        .and_then(|s| s.local_addr())
+        .expect("a free port");
+    rig.config.artnet[0].bind = art_bind;
     let (sp, ap) = (
         rig.sacn.local_addr().expect("addr").port(),
         rig.artnet.local_addr().expect("addr").port(),
@@ -473,11 +481,13 @@ fn tshark_decodes_every_packet() {
         );
     }
     let out = start(&rig.config, &dir, look(0.5, [1.0, 0.5, 0.0]));
-    let (mut data, mut syncs) = (0, 0);
+    let (mut data, mut syncs, mut discovery) = (0, 0, 0);
     receive_until(&rig.sacn, Duration::from_secs(3), |p| {
         if let Some(s) = parse_sacn(p) {
             assert_eq!(s.sync_universe, 7, "data packets carry the sync universe");
             data += 1;
+        } else if parse_discovery(p).is_some() {
+            discovery += 1;
         } else {
             assert_eq!(parse_sync(p), Some(7), "a sync packet for universe 7");
             syncs += 1;
@@ -488,7 +498,16 @@ fn tshark_decodes_every_packet() {
         syncs >= 9,
         "a sync packet follows each frame: {syncs} for {data} data"
     );
+    assert!(discovery >= 1, "universe discovery at start");
     receive_until(&rig.artnet, Duration::from_secs(3), |_| true);
+    // Polled, it answers with an ArtPollReply to the poller (here: the Art-Net receiver).
+    rig.artnet
+        .send_to(&encode_artpoll(), art_bind)
+        .expect("send ArtPoll");
+    let (_, replied) = receive_until(&rig.artnet, Duration::from_secs(3), |p| {
+        parse_pollreply(p).is_some()
+    });
+    assert!(replied, "an ArtPollReply");
     out.shutdown();
     // dumpcap writes the file about half a second late: send a marker after the last
     // packet and wait until the capture file holds it before stopping tshark.
@@ -523,7 +542,12 @@ fn tshark_decodes_every_packet() {
         .args(["-e", "frame.len", "-e", "frame.protocols"])
         .args(["-e", "_ws.malformed", "-e", "_ws.expert.severity"])
         .args(["-e", "acn.dmx.universe", "-e", "acn.dmx.option_s"])
-        .args(["-e", "artnet.output.sequence"])
+        .args([
+            "-e",
+            "artnet.output.sequence",
+            "-e",
+            "artnet.poll_reply.short_name",
+        ])
         .output()
         .expect("tshark reads the capture");
     let text = String::from_utf8_lossy(&fields.stdout);
@@ -532,11 +556,13 @@ fn tshark_decodes_every_packet() {
     let (mut art, mut acn_data, mut terminated, mut sync) = (0, 0, 0, 0);
     for line in &lines {
         let f: Vec<&str> = line.split('|').collect();
-        assert_eq!(f.len(), 7, "{line}");
+        assert_eq!(f.len(), 8, "{line}");
         assert!(f[2].is_empty(), "malformed: {line}");
         // Expert info of severity "error" (PI_ERROR = 0x00800000).
         assert!(!f[3].contains("8388608"), "expert error: {line}");
-        if f[1].contains(":artnet") {
+        if f[1].contains(":artnet") && !f[7].is_empty() {
+            assert_eq!(f[7], "visobjd", "ArtPollReply: {line}");
+        } else if f[1].contains(":artnet") {
             art += 1;
             assert!(!f[6].is_empty() && f[6] != "0", "ArtDmx sequence: {line}");
         } else if f[1].ends_with(":acn") {
@@ -546,18 +572,27 @@ fn tshark_decodes_every_packet() {
                 terminated += 1;
             }
         } else {
-            // Wireshark 4.0 does not dissect E1.31 synchronization packets (root vector
-            // 0x08) and shows them as data; they are checked byte by byte above.
+            // Wireshark 4.0 does not dissect E1.31's extended packets (root vector 0x08):
+            // synchronization (49 bytes, 91 on the wire) and universe discovery (120 + 2
+            // per universe: 166 with two) show as data; both are checked byte by byte above.
             assert!(
-                f[1].ends_with(":udp:data") && f[0] == "91",
+                f[1].ends_with(":udp:data") && (f[0] == "91" || f[0] == "166"),
                 "not decoded as E1.31 or Art-Net: {line}"
             );
-            sync += 1;
+            if f[0] == "91" {
+                sync += 1;
+            }
         }
     }
     assert!(
         art >= 4 && acn_data >= 10,
         "{art} ArtDmx, {acn_data} E1.31 data"
+    );
+    assert!(
+        lines
+            .iter()
+            .any(|l| l.contains(":artnet") && l.ends_with("|visobjd")),
+        "tshark decodes the ArtPollReply"
     );
     println!(
         "tshark: {art} ArtDmx, {acn_data} E1.31 data ({terminated} terminated), {sync} sync, none malformed"
@@ -566,5 +601,105 @@ fn tshark_decodes_every_packet() {
         terminated, 6,
         "three terminated packets for each of two universes"
     );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Whether `p` is an ArtPoll (Art-Net ID, OpPoll 0x2000, protocol version 14).
+fn is_artpoll(p: &[u8]) -> bool {
+    p.len() >= 14 && &p[..8] == b"Art-Net\0" && p[8..12] == [0x00, 0x20, 0, 14]
+}
+
+/// Art-Net discovery: ArtPoll goes to the configured (broadcast) address, ArtDmx never
+/// does; a node that answers gets unicast ArtDmx for exactly the universes it outputs; and
+/// visobjd answers a poll with its own ports. On loopback, 127.0.0.2 stands for the
+/// broadcast address and 127.0.0.3 for a node (the same port, as on a real network).
+#[test]
+fn artnet_discovery_sends_unicast_to_the_nodes_that_answer() {
+    let broadcast = UdpSocket::bind("127.0.0.2:0").expect("bind 127.0.0.2");
+    broadcast
+        .set_read_timeout(Some(Duration::from_millis(50)))
+        .expect("timeout");
+    let port = broadcast.local_addr().expect("addr").port();
+    let node = UdpSocket::bind(("127.0.0.3", port)).expect("bind 127.0.0.3");
+    node.set_read_timeout(Some(Duration::from_millis(50)))
+        .expect("timeout");
+    let config = OutputConfig {
+        rate_hz: 44,
+        artnet: vec![ArtnetDest {
+            destination: "127.0.0.2".into(),
+            port,
+            discover: true,
+            ..ArtnetDest::default()
+        }],
+        ..OutputConfig::default()
+    };
+    let dir = state_dir("artnet-discovery");
+    let out = start(&config, &dir, look(1.0, [1.0; 3]));
+    // The poll arrives; until a node answers, nothing else does (no broadcast ArtDmx).
+    let mut visobjd = None;
+    let mut buf = [0u8; 1500];
+    let end = Instant::now() + Duration::from_secs(5);
+    while visobjd.is_none() && Instant::now() < end {
+        if let Ok((n, from)) = broadcast.recv_from(&mut buf) {
+            assert!(
+                is_artpoll(&buf[..n]),
+                "only ArtPoll to the broadcast address"
+            );
+            visobjd = Some(from);
+        }
+    }
+    let visobjd = visobjd.expect("an ArtPoll within 5 s");
+    // The node outputs port-address 0 (scene universe 1, offset -1) and 5 (not patched).
+    node.send_to(&encode_node_reply([127, 0, 0, 3], 0, 0, &[0, 5]), visobjd)
+        .expect("reply");
+    let first = wait_artnet(&node, 0, |_| true);
+    assert_eq!(first.dmx[0], 255, "the look reaches the node");
+    let (rest, _) = receive_until(&node, Duration::from_millis(300), |_| false);
+    assert!(
+        rest.iter().all(|(_, p)| parse_artnet(p).port_address == 0),
+        "only the universe the node outputs"
+    );
+    let (bcast, _) = receive_until(&broadcast, Duration::from_millis(300), |_| false);
+    assert!(
+        bcast.iter().all(|(_, p)| is_artpoll(p)),
+        "no ArtDmx to the broadcast address"
+    );
+    // Polled, visobjd describes its two universes as input ports (onto the network).
+    let poller = UdpSocket::bind("127.0.0.1:0").expect("bind poller");
+    poller
+        .set_read_timeout(Some(Duration::from_millis(50)))
+        .expect("timeout");
+    poller.send_to(&encode_artpoll(), visobjd).expect("poll");
+    let (got, ok) = receive_until(&poller, Duration::from_secs(3), |p| {
+        parse_pollreply(p).is_some()
+    });
+    assert!(ok, "an ArtPollReply");
+    let reply = parse_pollreply(&got.last().expect("a reply").1).expect("a reply");
+    assert_eq!(reply.short_name, "visobjd");
+    assert_eq!(reply.style, 1, "StController");
+    assert_eq!(reply.ip, [127, 0, 0, 1]);
+    assert_eq!((reply.net, reply.sub, reply.bind_index), (0, 0, 1));
+    assert_eq!(reply.ports, [(0x40, 0, 0), (0x40, 1, 0)]);
+    out.shutdown();
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// E1.31 universe discovery at start (then every 10 s), to the unicast receiver: the
+/// scene's universes, sorted, on one page, under the output's CID and source name.
+#[test]
+fn sacn_universe_discovery_lists_the_universes() {
+    let rig = rig(44);
+    let dir = state_dir("sacn-discovery");
+    let out = start(&rig.config, &dir, look(1.0, [1.0; 3]));
+    let (got, ok) = receive_until(&rig.sacn, Duration::from_secs(3), |p| {
+        parse_discovery(p).is_some()
+    });
+    assert!(ok, "a universe discovery packet");
+    let d = parse_discovery(&got.last().expect("a packet").1).expect("discovery");
+    assert_eq!(d.universes, [1, 2]);
+    assert_eq!((d.page, d.last_page), (0, 0));
+    assert_eq!(d.source_name, "visobjd test");
+    assert_eq!(d.cid, *out.cid().as_bytes());
+    out.shutdown();
     std::fs::remove_dir_all(&dir).ok();
 }

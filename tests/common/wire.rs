@@ -75,7 +75,7 @@ pub fn parse_sacn(p: &[u8]) -> Option<Sacn> {
 
 /// Decodes an E1.31 synchronization packet (Table 4-2) to its sync address.
 pub fn parse_sync(p: &[u8]) -> Option<u16> {
-    if p.len() < 22 || p[18..22] != [0, 0, 0, 8] {
+    if p.len() < 44 || p[18..22] != [0, 0, 0, 8] || p[40..44] != [0, 0, 0, 1] {
         return None;
     }
     assert_eq!(p.len(), 49, "a sync packet is 49 bytes");
@@ -90,6 +90,70 @@ pub fn parse_sync(p: &[u8]) -> Option<u16> {
     );
     assert_eq!(p[47..49], [0, 0], "reserved");
     Some(u16::from_be_bytes([p[45], p[46]]))
+}
+
+/// An E1.31 universe discovery packet (E1.31-2018 Table 4-3).
+#[derive(Debug, Clone)]
+pub struct Discovery {
+    pub cid: [u8; 16],
+    pub source_name: String,
+    pub page: u8,
+    pub last_page: u8,
+    pub universes: Vec<u16>,
+}
+
+/// Decodes an E1.31 universe discovery packet; `None` for anything else.
+pub fn parse_discovery(p: &[u8]) -> Option<Discovery> {
+    if p.len() < 44 || p[18..22] != [0, 0, 0, 8] || p[40..44] != [0, 0, 0, 2] {
+        return None;
+    }
+    assert!(
+        p.len() >= 120 && p.len().is_multiple_of(2),
+        "discovery length {}",
+        p.len()
+    );
+    assert_eq!(p[0..2], [0x00, 0x10], "preamble size");
+    assert_eq!(&p[4..16], ACN_ID, "ACN packet identifier");
+    let flags_len = |at: usize| u16::from_be_bytes([p[at], p[at + 1]]);
+    assert_eq!(
+        flags_len(16),
+        0x7000 | (p.len() - 16) as u16,
+        "root flags+length"
+    );
+    assert_eq!(
+        flags_len(38),
+        0x7000 | (p.len() - 38) as u16,
+        "framing flags+length"
+    );
+    assert_eq!(p[108..112], [0; 4], "reserved");
+    assert_eq!(
+        flags_len(112),
+        0x7000 | (p.len() - 112) as u16,
+        "discovery flags+length"
+    );
+    assert_eq!(
+        p[114..118],
+        [0, 0, 0, 1],
+        "VECTOR_UNIVERSE_DISCOVERY_UNIVERSE_LIST"
+    );
+    let name = &p[44..108];
+    let end = name.iter().position(|&b| b == 0).unwrap_or(64);
+    let universes: Vec<u16> = p[120..]
+        .chunks(2)
+        .map(|c| u16::from_be_bytes([c[0], c[1]]))
+        .collect();
+    assert!(
+        universes.windows(2).all(|w| w[0] < w[1]),
+        "sorted: {universes:?}"
+    );
+    assert!(p[118] <= p[119], "page within last page");
+    Some(Discovery {
+        cid: p[22..38].try_into().expect("16 bytes"),
+        source_name: String::from_utf8_lossy(&name[..end]).into_owned(),
+        page: p[118],
+        last_page: p[119],
+        universes,
+    })
 }
 
 /// An Art-Net 4 ArtDmx packet.
@@ -114,6 +178,76 @@ pub fn parse_artnet(p: &[u8]) -> ArtDmx {
         port_address: u16::from_le_bytes([p[14], p[15]]),
         dmx: p[18..].to_vec(),
     }
+}
+
+/// An ArtPoll (Art-Net 4, OpPoll 0x2000): ID, opcode, protocol version 14, flags 0,
+/// diagnostics priority.
+pub fn encode_artpoll() -> Vec<u8> {
+    let mut p = b"Art-Net\0".to_vec();
+    p.extend_from_slice(&0x2000u16.to_le_bytes());
+    p.extend_from_slice(&[0, 14, 0, 0x10]);
+    p
+}
+
+/// A node's ArtPollReply (Art-Net 4, OpPollReply 0x2100, 239 bytes) whose output ports
+/// take `outputs` (the low nibble of each port-address) in `net`/`sub`.
+pub fn encode_node_reply(ip: [u8; 4], net: u8, sub: u8, outputs: &[u8]) -> Vec<u8> {
+    let mut p = vec![0u8; 239];
+    p[..8].copy_from_slice(b"Art-Net\0");
+    p[8..10].copy_from_slice(&0x2100u16.to_le_bytes());
+    p[10..14].copy_from_slice(&ip);
+    p[14..16].copy_from_slice(&0x1936u16.to_le_bytes());
+    p[18] = net;
+    p[19] = sub;
+    p[26..35].copy_from_slice(b"test node");
+    p[173] = outputs.len() as u8;
+    for (i, &o) in outputs.iter().enumerate() {
+        p[174 + i] = 0x80; // output port, DMX512
+        p[190 + i] = o;
+    }
+    p[200] = 0x00; // StNode
+    p[211] = 1;
+    p
+}
+
+/// What an ArtPollReply says of a device.
+#[derive(Debug, Clone)]
+pub struct PollReply {
+    pub ip: [u8; 4],
+    pub short_name: String,
+    pub net: u8,
+    pub sub: u8,
+    /// Per port: (port type, SwIn, SwOut).
+    pub ports: Vec<(u8, u8, u8)>,
+    pub style: u8,
+    pub bind_index: u8,
+}
+
+/// Decodes an ArtPollReply; `None` for any other Art-Net packet.
+pub fn parse_pollreply(p: &[u8]) -> Option<PollReply> {
+    if p.len() < 10 || &p[0..8] != b"Art-Net\0" || u16::from_le_bytes([p[8], p[9]]) != 0x2100 {
+        return None;
+    }
+    assert!(p.len() >= 213, "ArtPollReply of {} bytes", p.len());
+    assert_eq!(u16::from_le_bytes([p[14], p[15]]), 0x1936, "port 6454");
+    let name = &p[26..44];
+    let end = name
+        .iter()
+        .position(|&b| b == 0)
+        .expect("a NUL-terminated short name");
+    let n = usize::from(p[173]);
+    assert!(n <= 4, "at most four ports per reply");
+    Some(PollReply {
+        ip: p[10..14].try_into().expect("4 bytes"),
+        short_name: String::from_utf8_lossy(&name[..end]).into_owned(),
+        net: p[18],
+        sub: p[19],
+        ports: (0..n)
+            .map(|i| (p[174 + i], p[186 + i], p[190 + i]))
+            .collect(),
+        style: p[200],
+        bind_index: p[211],
+    })
 }
 
 /// Option bits of an E1.31 data packet (Table 6-1, octet 112).

@@ -78,6 +78,10 @@ pub struct ArtnetDest {
     pub bind: SocketAddr,
     /// Art-Net port-address = scene universe + this.
     pub universe_offset: i32,
+    /// Find the nodes: ArtPoll goes to `destination` (a broadcast address) every 3 s and
+    /// ArtDmx goes unicast to each node that reported the universe in its ArtPollReply,
+    /// never to `destination` itself (Art-Net 3 and later forbid broadcasting ArtDmx).
+    pub discover: bool,
 }
 
 impl Default for ArtnetDest {
@@ -87,6 +91,7 @@ impl Default for ArtnetDest {
             port: 6454,
             bind: SocketAddr::new(IpAddr::V4(Ipv4Addr::LOCALHOST), 0),
             universe_offset: -1,
+            discover: false,
         }
     }
 }

@@ -202,6 +202,8 @@ impl Output {
                 socket: sockets.bind(d.bind)?,
                 to: SocketAddr::new(ip, d.port),
                 port_addresses,
+                discover: d.discover,
+                nodes: Vec::new(),
                 log: Throttle::default(),
             });
         }
@@ -253,6 +255,8 @@ impl Output {
             counters: counters.clone(),
             stop: stop.clone(),
             buf: Vec::with_capacity(700),
+            poll_due: now,
+            discovery_due: now,
         };
         let thread = thread::Builder::new()
             .name("dmx-output".into())
@@ -495,7 +499,68 @@ struct ArtnetSink {
     to: SocketAddr,
     /// Per patched universe.
     port_addresses: Vec<u16>,
+    /// ArtPoll to `to`, ArtDmx unicast to [`ArtnetSink::nodes`] (`discover = true`).
+    discover: bool,
+    nodes: Vec<Node>,
     log: Throttle,
+}
+
+/// An Art-Net node that answered ArtPoll: where it is and what it outputs.
+#[derive(Debug, Clone)]
+struct Node {
+    ip: IpAddr,
+    /// Its reply's BindIndex: a node with many ports answers once per group of four.
+    bind_index: u8,
+    /// The port-addresses its output ports take from the network.
+    outputs: Vec<u16>,
+    seen: Instant,
+}
+
+/// How often a discovering Art-Net destination polls (Art-Net 4: every 2.5 to 3 s).
+const POLL_EVERY: Duration = Duration::from_secs(3);
+/// A node silent this long (three polls and a margin) is gone.
+const NODE_GONE: Duration = Duration::from_secs(10);
+/// How often E1.31 universe discovery goes out (E1.31-2018 8: every 10 s).
+const DISCOVERY_EVERY: Duration = Duration::from_secs(10);
+/// The universe whose multicast group carries E1.31 universe discovery.
+const DISCOVERY_UNIVERSE: u16 = 64214;
+
+impl ArtnetSink {
+    /// Records (or refreshes) a node's ArtPollReply.
+    fn found(&mut self, ip: IpAddr, bind_index: u8, outputs: &[u16], now: Instant) {
+        match self
+            .nodes
+            .iter_mut()
+            .find(|n| n.ip == ip && n.bind_index == bind_index)
+        {
+            Some(node) => {
+                node.outputs = outputs.to_vec();
+                node.seen = now;
+            }
+            None => {
+                tracing::info!(node = %ip, bind_index, ?outputs, "Art-Net node found");
+                self.nodes.push(Node {
+                    ip,
+                    bind_index,
+                    outputs: outputs.to_vec(),
+                    seen: now,
+                });
+            }
+        }
+    }
+}
+
+/// The local IPv4 address the system would send to `peer` from (for an ArtPollReply from
+/// a socket bound to the wildcard address); unspecified when there is no route.
+fn route_to(peer: SocketAddr) -> Ipv4Addr {
+    UdpSocket::bind((Ipv4Addr::UNSPECIFIED, 0))
+        .and_then(|s| s.connect(peer).and_then(|()| s.local_addr()))
+        .ok()
+        .and_then(|a| match a.ip() {
+            IpAddr::V4(ip) => Some(ip),
+            IpAddr::V6(_) => None,
+        })
+        .unwrap_or(Ipv4Addr::UNSPECIFIED)
 }
 
 /// Keep-alive bookkeeping of one universe.
@@ -533,6 +598,10 @@ struct Clock {
     counters: Arc<Counters>,
     stop: Arc<AtomicBool>,
     buf: Vec<u8>,
+    /// When discovering Art-Net destinations poll next.
+    poll_due: Instant,
+    /// When E1.31 universe discovery goes out next.
+    discovery_due: Instant,
 }
 
 impl Clock {
@@ -640,6 +709,128 @@ impl Clock {
         if sent_any {
             self.send_syncs(now);
         }
+        self.discovery(now);
+    }
+
+    /// Art-Net's poll and reply and E1.31's universe discovery: what arrived on the
+    /// Art-Net sockets (non-blocking: one call that finds nothing on a quiet network), and
+    /// the periodic announcements when due.
+    fn discovery(&mut self, now: Instant) {
+        self.receive_artnet(now);
+        if now >= self.poll_due {
+            self.poll_due = now + POLL_EVERY;
+            if let Ok(poll) = wire::artpoll() {
+                for sink in self.artnet.iter_mut().filter(|s| s.discover) {
+                    sink.nodes
+                        .retain(|n| now.duration_since(n.seen) < NODE_GONE);
+                    let socket = &self.sockets[sink.socket];
+                    deliver(
+                        socket,
+                        &self.counters,
+                        sink.errors,
+                        &mut sink.log,
+                        now,
+                        "Art-Net",
+                        sink.to,
+                        Ok(&poll),
+                    );
+                }
+            }
+        }
+        if now >= self.discovery_due {
+            self.discovery_due = now + DISCOVERY_EVERY;
+            self.send_universe_discovery(now);
+        }
+    }
+
+    /// Answers ArtPolls and records the nodes' ArtPollReplies, from every socket an
+    /// Art-Net destination sends from.
+    fn receive_artnet(&mut self, now: Instant) {
+        let mut sockets: Vec<usize> = self.artnet.iter().map(|s| s.socket).collect();
+        sockets.sort_unstable();
+        sockets.dedup();
+        let mut packet = [0u8; 600];
+        for i in sockets {
+            // A bounded drain: a flood cannot hold the clock.
+            for _ in 0..64 {
+                let Ok((n, from)) = self.sockets[i].recv_from(&mut packet) else {
+                    break;
+                };
+                match wire::parse_artnet_in(&packet[..n]) {
+                    Some(wire::ArtIn::Poll) => self.answer_poll(i, from, now),
+                    Some(wire::ArtIn::Reply {
+                        bind_index,
+                        outputs,
+                    }) => {
+                        for sink in self
+                            .artnet
+                            .iter_mut()
+                            .filter(|s| s.discover && s.socket == i)
+                        {
+                            sink.found(from.ip(), bind_index, &outputs, now);
+                        }
+                    }
+                    None => {}
+                }
+            }
+        }
+    }
+
+    /// ArtPollReply to whoever polled socket `i`, for every destination sending from it,
+    /// back to the poller's address and port (6454 for Art-Net gear, which sends from it).
+    fn answer_poll(&mut self, i: usize, from: SocketAddr, now: Instant) {
+        let ip = match self.sockets[i].local_addr().map(|a| a.ip()) {
+            Ok(IpAddr::V4(ip)) if !ip.is_unspecified() => ip,
+            _ => route_to(from),
+        };
+        for sink in self.artnet.iter_mut().filter(|s| s.socket == i) {
+            let replies = wire::artpollreplies(ip, &sink.port_addresses);
+            for reply in replies.iter().flatten() {
+                deliver(
+                    &self.sockets[i],
+                    &self.counters,
+                    sink.errors,
+                    &mut sink.log,
+                    now,
+                    "Art-Net",
+                    from,
+                    Ok(reply),
+                );
+            }
+        }
+    }
+
+    /// E1.31 universe discovery (E1.31-2018 8): every universe this source sends, in
+    /// pages of 512, to each sACN destination: the discovery universe's multicast group,
+    /// or the unicast receiver.
+    fn send_universe_discovery(&mut self, now: Instant) {
+        let universes = self.patch.universes().to_vec();
+        let pages: Vec<&[u16]> = universes.chunks(wire::DISCOVERY_PAGE).collect();
+        let last = (pages.len().max(1) - 1).min(255) as u8;
+        for sink in &mut self.sacn {
+            let to = sink.address(DISCOVERY_UNIVERSE);
+            for (page, list) in pages.iter().enumerate().take(256) {
+                let packet = wire::sacn_discovery(
+                    self.cid,
+                    &sink.source_name,
+                    page as u8,
+                    last,
+                    list,
+                    &mut self.buf,
+                )
+                .map(|()| self.buf.as_slice());
+                deliver(
+                    &self.sockets[sink.socket],
+                    &self.counters,
+                    sink.errors,
+                    &mut sink.log,
+                    now,
+                    "sACN",
+                    to,
+                    packet,
+                );
+            }
+        }
     }
 
     /// Whether universe `u` goes out this tick (always, unless keep-alive is idling it).
@@ -693,19 +884,29 @@ impl Clock {
         self.artnet_sequence[u] = wire::next_artnet_sequence(self.artnet_sequence[u]);
         let seq = self.artnet_sequence[u];
         for sink in &mut self.artnet {
-            let packet = wire::artdmx(sink.port_addresses[u], seq, data);
+            let pa = sink.port_addresses[u];
+            let packet = wire::artdmx(pa, seq, data);
             let socket = &self.sockets[sink.socket];
             let packet = packet.as_deref().map_err(Clone::clone);
-            deliver(
-                socket,
-                &self.counters,
-                sink.errors,
-                &mut sink.log,
-                now,
-                "Art-Net",
-                sink.to,
-                packet,
-            );
+            let mut to_node = |to| {
+                deliver(
+                    socket,
+                    &self.counters,
+                    sink.errors,
+                    &mut sink.log,
+                    now,
+                    "Art-Net",
+                    to,
+                    packet.clone(),
+                )
+            };
+            if sink.discover {
+                for node in sink.nodes.iter().filter(|n| n.outputs.contains(&pa)) {
+                    to_node(SocketAddr::new(node.ip, sink.to.port()));
+                }
+            } else {
+                to_node(sink.to);
+            }
         }
     }
 
