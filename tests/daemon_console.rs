@@ -374,7 +374,10 @@ fn grab_reproduces_the_console_on_every_light_and_ignores_the_daemons_own_output
     }
 
     let console = Console::start(input, 1, "Eos", show(100, &console_levels()));
-    let listed = wait_sources(&mut d, "the console", |s| !s.is_empty());
+    // Each universe's stream is sampled on its own: wait for both.
+    let listed = wait_sources(&mut d, "the console on both universes", |s| {
+        s.iter().any(|x| x.universes == "1 2")
+    });
     assert_eq!(
         listed.len(),
         1,

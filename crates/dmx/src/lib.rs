@@ -173,15 +173,18 @@ impl Output {
                 AtomicU64::new(0),
             ));
             sacn.push(SacnSink {
-                errors: destinations.len() - 1,
-                socket: sockets.bind(d.bind)?,
+                route: Route {
+                    socket: sockets.bind(d.bind)?,
+                    errors: destinations.len() - 1,
+                    protocol: "sACN",
+                    log: Throttle::default(),
+                },
                 target,
                 port: d.port,
                 source_name: d.source_name.clone(),
                 priority: d.priority,
                 sync_universe: d.sync_universe,
                 sync_sequence: 0,
-                log: Throttle::default(),
             });
         }
         let mut artnet = Vec::new();
@@ -198,13 +201,16 @@ impl Output {
                 AtomicU64::new(0),
             ));
             artnet.push(ArtnetSink {
-                errors: destinations.len() - 1,
-                socket: sockets.bind(d.bind)?,
+                route: Route {
+                    socket: sockets.bind(d.bind)?,
+                    errors: destinations.len() - 1,
+                    protocol: "Art-Net",
+                    log: Throttle::default(),
+                },
                 to: SocketAddr::new(ip, d.port),
                 port_addresses,
                 discover: d.discover,
                 nodes: Vec::new(),
-                log: Throttle::default(),
             });
         }
 
@@ -401,26 +407,36 @@ impl Sockets {
     }
 }
 
-/// Sends one encoded packet; a failure (encoding or socket) is counted and logged at a
-/// rate-limited pace, never fatal: the clock goes on.
-#[allow(clippy::too_many_arguments)]
-fn deliver(
-    socket: &UdpSocket,
-    counters: &Counters,
-    destination: usize,
-    log: &mut Throttle,
-    now: Instant,
-    protocol: &str,
-    to: SocketAddr,
-    packet: Result<&[u8], String>,
-) {
-    let result = packet.and_then(|p| socket.send_to(p, to).map(drop).map_err(|e| e.to_string()));
-    if let Err(e) = result {
-        counters.send_errors.fetch_add(1, Ordering::Relaxed);
-        counters.destinations[destination]
-            .1
-            .fetch_add(1, Ordering::Relaxed);
-        log.error(now, protocol, to, &e);
+/// Where a destination's packets leave from, and its failures: the socket, its counter in
+/// [`Counters::destinations`], its rate-limited log.
+struct Route {
+    socket: usize,
+    errors: usize,
+    protocol: &'static str,
+    log: Throttle,
+}
+
+impl Route {
+    /// Sends one encoded packet; a failure (encoding or socket) is counted and logged at a
+    /// rate-limited pace, never fatal: the clock goes on.
+    fn send(
+        &mut self,
+        sockets: &[UdpSocket],
+        counters: &Counters,
+        now: Instant,
+        to: SocketAddr,
+        packet: Result<&[u8], String>,
+    ) {
+        let socket = &sockets[self.socket];
+        let result =
+            packet.and_then(|p| socket.send_to(p, to).map(drop).map_err(|e| e.to_string()));
+        if let Err(e) = result {
+            counters.send_errors.fetch_add(1, Ordering::Relaxed);
+            counters.destinations[self.errors]
+                .1
+                .fetch_add(1, Ordering::Relaxed);
+            self.log.error(now, self.protocol, to, &e);
+        }
     }
 }
 
@@ -463,16 +479,13 @@ impl Throttle {
 }
 
 struct SacnSink {
-    socket: usize,
-    /// Index of its counter in [`Counters::destinations`].
-    errors: usize,
+    route: Route,
     target: SacnTarget,
     port: u16,
     source_name: String,
     priority: u8,
     sync_universe: u16,
     sync_sequence: u8,
-    log: Throttle,
 }
 
 impl SacnSink {
@@ -493,16 +506,13 @@ impl SacnSink {
 }
 
 struct ArtnetSink {
-    socket: usize,
-    /// Index of its counter in [`Counters::destinations`].
-    errors: usize,
+    route: Route,
     to: SocketAddr,
     /// Per patched universe.
     port_addresses: Vec<u16>,
     /// ArtPoll to `to`, ArtDmx unicast to [`ArtnetSink::nodes`] (`discover = true`).
     discover: bool,
     nodes: Vec<Node>,
-    log: Throttle,
 }
 
 /// An Art-Net node that answered ArtPoll: where it is and what it outputs.
@@ -719,22 +729,13 @@ impl Clock {
         self.receive_artnet(now);
         if now >= self.poll_due {
             self.poll_due = now + POLL_EVERY;
-            if let Ok(poll) = wire::artpoll() {
-                for sink in self.artnet.iter_mut().filter(|s| s.discover) {
-                    sink.nodes
-                        .retain(|n| now.duration_since(n.seen) < NODE_GONE);
-                    let socket = &self.sockets[sink.socket];
-                    deliver(
-                        socket,
-                        &self.counters,
-                        sink.errors,
-                        &mut sink.log,
-                        now,
-                        "Art-Net",
-                        sink.to,
-                        Ok(&poll),
-                    );
-                }
+            let poll = wire::artpoll();
+            for sink in self.artnet.iter_mut().filter(|s| s.discover) {
+                sink.nodes
+                    .retain(|n| now.duration_since(n.seen) < NODE_GONE);
+                let packet = poll.as_deref().map_err(Clone::clone);
+                sink.route
+                    .send(&self.sockets, &self.counters, now, sink.to, packet);
             }
         }
         if now >= self.discovery_due {
@@ -746,7 +747,7 @@ impl Clock {
     /// Answers ArtPolls and records the nodes' ArtPollReplies, from every socket an
     /// Art-Net destination sends from.
     fn receive_artnet(&mut self, now: Instant) {
-        let mut sockets: Vec<usize> = self.artnet.iter().map(|s| s.socket).collect();
+        let mut sockets: Vec<usize> = self.artnet.iter().map(|s| s.route.socket).collect();
         sockets.sort_unstable();
         sockets.dedup();
         let mut packet = [0u8; 600];
@@ -765,7 +766,7 @@ impl Clock {
                         for sink in self
                             .artnet
                             .iter_mut()
-                            .filter(|s| s.discover && s.socket == i)
+                            .filter(|s| s.discover && s.route.socket == i)
                         {
                             sink.found(from.ip(), bind_index, &outputs, now);
                         }
@@ -783,19 +784,17 @@ impl Clock {
             Ok(IpAddr::V4(ip)) if !ip.is_unspecified() => ip,
             _ => route_to(from),
         };
-        for sink in self.artnet.iter_mut().filter(|s| s.socket == i) {
-            let replies = wire::artpollreplies(ip, &sink.port_addresses);
-            for reply in replies.iter().flatten() {
-                deliver(
-                    &self.sockets[i],
-                    &self.counters,
-                    sink.errors,
-                    &mut sink.log,
-                    now,
-                    "Art-Net",
-                    from,
-                    Ok(reply),
-                );
+        for sink in self.artnet.iter_mut().filter(|s| s.route.socket == i) {
+            match wire::artpollreplies(ip, &sink.port_addresses) {
+                Ok(replies) => {
+                    for reply in &replies {
+                        sink.route
+                            .send(&self.sockets, &self.counters, now, from, Ok(reply));
+                    }
+                }
+                Err(e) => sink
+                    .route
+                    .send(&self.sockets, &self.counters, now, from, Err(e)),
             }
         }
     }
@@ -819,16 +818,8 @@ impl Clock {
                     &mut self.buf,
                 )
                 .map(|()| self.buf.as_slice());
-                deliver(
-                    &self.sockets[sink.socket],
-                    &self.counters,
-                    sink.errors,
-                    &mut sink.log,
-                    now,
-                    "sACN",
-                    to,
-                    packet,
-                );
+                sink.route
+                    .send(&self.sockets, &self.counters, now, to, packet);
             }
         }
     }
@@ -866,17 +857,8 @@ impl Clock {
             };
             let packet = wire::sacn_data(&src, universe, seq, terminated, data, &mut self.buf)
                 .map(|()| self.buf.as_slice());
-            let socket = &self.sockets[sink.socket];
-            deliver(
-                socket,
-                &self.counters,
-                sink.errors,
-                &mut sink.log,
-                now,
-                "sACN",
-                to,
-                packet,
-            );
+            sink.route
+                .send(&self.sockets, &self.counters, now, to, packet);
         }
         if terminated || self.artnet.is_empty() {
             return;
@@ -886,19 +868,10 @@ impl Clock {
         for sink in &mut self.artnet {
             let pa = sink.port_addresses[u];
             let packet = wire::artdmx(pa, seq, data);
-            let socket = &self.sockets[sink.socket];
             let packet = packet.as_deref().map_err(Clone::clone);
             let mut to_node = |to| {
-                deliver(
-                    socket,
-                    &self.counters,
-                    sink.errors,
-                    &mut sink.log,
-                    now,
-                    "Art-Net",
-                    to,
-                    packet.clone(),
-                )
+                sink.route
+                    .send(&self.sockets, &self.counters, now, to, packet.clone())
             };
             if sink.discover {
                 for node in sink.nodes.iter().filter(|n| n.outputs.contains(&pa)) {
@@ -922,17 +895,8 @@ impl Clock {
                 &mut self.buf,
             )
             .map(|()| self.buf.as_slice());
-            let socket = &self.sockets[sink.socket];
-            deliver(
-                socket,
-                &self.counters,
-                sink.errors,
-                &mut sink.log,
-                now,
-                "sACN",
-                to,
-                packet,
-            );
+            sink.route
+                .send(&self.sockets, &self.counters, now, to, packet);
         }
     }
 
