@@ -6,6 +6,7 @@
 //! A command that fails changes nothing and answers one `/vo/error`.
 
 mod constraint;
+mod eos_in;
 mod gallery;
 mod generate;
 mod live;
@@ -27,6 +28,7 @@ use visobjd_scene::look::Look;
 
 /// Every command the daemon understands.
 enum Command {
+    EosIn(eos_in::Cmd),
     Objective(objective::Cmd),
     Constraint(constraint::Cmd),
     Generate(generate::Cmd),
@@ -39,6 +41,9 @@ enum Command {
 
 impl Command {
     fn parse(req: &Request) -> Result<Command, String> {
+        if let Some(c) = eos_in::Cmd::parse(req)? {
+            return Ok(Command::EosIn(c));
+        }
         if let Some(c) = objective::Cmd::parse(req)? {
             return Ok(Command::Objective(c));
         }
@@ -72,6 +77,7 @@ impl Command {
     /// The address family, for [`parse`]'s callers.
     fn family(&self) -> &'static str {
         match self {
+            Command::EosIn(_) => "eos",
             Command::Objective(_) => "objective",
             Command::Constraint(_) => "constraint",
             Command::Generate(_) => "generate",
@@ -85,6 +91,7 @@ impl Command {
 
     fn apply(self, e: &Arc<Engine>, peer: &Peer) -> Result<Vec<OscMessage>, String> {
         match self {
+            Command::EosIn(c) => c.apply(e),
             Command::Objective(c) => c.apply(e),
             Command::Constraint(c) => c.apply(e),
             Command::Generate(c) => c.apply(e, peer),
