@@ -75,7 +75,9 @@ const PROFILES: &[(&str, &[&str])] = &[
     ("rgbw", &["Red", "Green", "Blue", "White"]),
     (
         "full16",
-        &["At16", "Red", "Green", "Blue", "White", "Amber", "Lime", "-", "-"],
+        &[
+            "At16", "Red", "Green", "Blue", "White", "Amber", "Lime", "-", "-",
+        ],
     ),
     ("cmy", &["At", "Cyan", "Magenta", "Yellow", "-"]),
     ("irgbl", &["At", "Red", "Green", "Blue", "Lime"]),
@@ -233,7 +235,12 @@ fn assert_lines_match_the_wire(d: &Daemon, lines: &[String]) {
 }
 
 /// The export stage with `[eos]` pointing at `console`.
-fn export_daemon(name: &str, console: std::net::SocketAddr, protocol: &str, user: Option<u32>) -> Daemon {
+fn export_daemon(
+    name: &str,
+    console: std::net::SocketAddr,
+    protocol: &str,
+    user: Option<u32>,
+) -> Daemon {
     let dir = temp_dir(&format!("{name}-scene"));
     let mut extra = format!("\n[eos]\naddress = \"{console}\"\nprotocol = \"{protocol}\"\n");
     if let Some(u) = user {

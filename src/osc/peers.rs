@@ -46,7 +46,11 @@ pub struct PeerConfig {
 
 impl PeerConfig {
     fn ip(&self) -> Option<IpAddr> {
-        self.address.trim().parse::<IpAddr>().ok().map(|a| a.to_canonical())
+        self.address
+            .trim()
+            .parse::<IpAddr>()
+            .ok()
+            .map(|a| a.to_canonical())
     }
 }
 
@@ -57,7 +61,9 @@ pub fn validate(peers: &[PeerConfig], allow: &[Cidr]) -> Result<(), String> {
     for (i, p) in peers.iter().enumerate() {
         let at = format!("osc.peer[{i}] (`{}`)", p.name);
         if p.name.trim().is_empty() {
-            return Err(format!("osc.peer[{i}]: name is empty; give every peer a name"));
+            return Err(format!(
+                "osc.peer[{i}]: name is empty; give every peer a name"
+            ));
         }
         let ip = p.ip().ok_or_else(|| {
             format!(
@@ -165,12 +171,23 @@ mod tests {
             peer("eos", "127.0.0.3", PeerFraming::Tcp),
         ];
         assert_eq!(validate(&ok, &[]), Ok(()));
-        let dup = [ok[0].clone(), peer("tablet", "127.0.0.4", PeerFraming::Slip)];
+        let dup = [
+            ok[0].clone(),
+            peer("tablet", "127.0.0.4", PeerFraming::Slip),
+        ];
         assert!(validate(&dup, &[]).unwrap_err().contains("used twice"));
         let same = [ok[0].clone(), peer("eos", "127.0.0.2", PeerFraming::Udp)];
-        assert!(validate(&same, &[]).unwrap_err().contains("also peer `tablet`"));
+        assert!(
+            validate(&same, &[])
+                .unwrap_err()
+                .contains("also peer `tablet`")
+        );
         let port = [peer("eos", "127.0.0.1:3032", PeerFraming::Tcp)];
-        assert!(validate(&port, &[]).unwrap_err().contains("not an IP address"));
+        assert!(
+            validate(&port, &[])
+                .unwrap_err()
+                .contains("not an IP address")
+        );
         let far = [peer("eos", "10.0.0.5", PeerFraming::Tcp)];
         assert!(validate(&far, &[]).unwrap_err().contains("osc.allow"));
         let allow = [Cidr::parse("10.0.0.0/8").unwrap()];
@@ -189,7 +206,10 @@ mod tests {
             Some(from("127.0.0.2:9000"))
         );
         assert!(routes.tcp(from("127.0.0.2:1").ip()).is_none());
-        assert_eq!(routes.tcp(from("[::ffff:127.0.0.3]:1").ip()).unwrap().name, "eos");
+        assert_eq!(
+            routes.tcp(from("[::ffff:127.0.0.3]:1").ip()).unwrap().name,
+            "eos"
+        );
         assert!(routes.get(from("127.0.0.9:1").ip()).is_none());
     }
 }

@@ -436,7 +436,10 @@ impl Shared {
         let queue = Queue::new(&self.limits);
         let link = queue.link(framing);
         if !link.send(msg) {
-            return Err(format!("cannot encode {} for peer `{}`", msg.addr, route.name));
+            return Err(format!(
+                "cannot encode {} for peer `{}`",
+                msg.addr, route.name
+            ));
         }
         *slot = Some(link);
         drop(slot);
@@ -660,7 +663,10 @@ async fn serve_sender(from: SocketAddr, backlogs: Backlogs, sender: Sender, shar
             (shared.clone(), peer.clone(), Handle::current());
         let socket = sender.socket.clone();
         let handled = tokio::task::spawn_blocking(move || {
-            let to_tcp = handler_shared.routes.tcp(handler_peer.reply_addr.ip()).cloned();
+            let to_tcp = handler_shared
+                .routes
+                .tcp(handler_peer.reply_addr.ip())
+                .cloned();
             for bytes in batch {
                 for reply in handler_shared.dispatch(&bytes, &handler_peer) {
                     if let Some(route) = &to_tcp {
@@ -849,6 +855,14 @@ async fn connection(
                 })
                 .await
                 .unwrap_or_default();
+                // Pushes queued while these were handled (a subscription's state) go
+                // first, in the order they were made, as they would over UDP.
+                let mut pushed = Vec::new();
+                while let Ok(bytes) = queued.try_recv() {
+                    pushed.extend(bytes);
+                }
+                pushed.extend(out);
+                let out = pushed;
                 if let Err(e) = write(&mut wr, &out, deadline).await {
                     break e;
                 }
