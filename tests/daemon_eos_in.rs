@@ -82,7 +82,6 @@ fn a_flood_of_eos_output_gets_no_answer_and_the_dmx_keeps_running() {
     }
     assert!(sent >= 2000);
     assert_eq!(console.fence(), Vec::new(), "after all {sent} Eos messages");
-    d.wire.wait_frames_after(Instant::now(), "after the flood");
     d.wire.assert_continuous_since(before, "through the flood");
     // Still serving: the live look is what it was.
     let live = d.live();
