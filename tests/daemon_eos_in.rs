@@ -7,7 +7,7 @@ mod common;
 
 use std::time::Instant;
 
-use common::daemon::{Daemon, Osc, fixture, float, int, num, same_look, string};
+use common::daemon::{Daemon, Framing, Osc, fixture, float, int, num, same_look, string};
 use rosc::OscType;
 
 /// One of each kind of message Eos sends with OSC TX on, `i` varying the values.
@@ -61,13 +61,9 @@ fn eos_output(i: i32) -> Vec<(String, Vec<OscType>)> {
     ]
 }
 
-#[test]
-fn a_flood_of_eos_output_gets_no_answer_and_the_dmx_keeps_running() {
-    let mut d = Daemon::start("eos-flood");
-    d.ok("/vo/light/1/level", vec![int(62)], "/vo/light");
-    let mut console = d.client();
+/// Sends at least 2000 messages of Eos's output from `console`; nothing may come back.
+fn flood(console: &mut impl Osc) {
     let kinds = eos_output(0).len() as i32;
-    let before = Instant::now();
     let mut sent = 0;
     for i in 0..(2000 / kinds + 1) {
         for (addr, args) in eos_output(i) {
@@ -82,6 +78,17 @@ fn a_flood_of_eos_output_gets_no_answer_and_the_dmx_keeps_running() {
     }
     assert!(sent >= 2000);
     assert_eq!(console.fence(), Vec::new(), "after all {sent} Eos messages");
+}
+
+#[test]
+fn a_flood_of_eos_output_gets_no_answer_and_the_dmx_keeps_running() {
+    let mut d = Daemon::start("eos-flood");
+    d.ok("/vo/light/1/level", vec![int(62)], "/vo/light");
+    let before = Instant::now();
+    // Eos's OSC UDP TX, then a TCP connection in each framing (Eos's TCP modes).
+    flood(&mut d.client());
+    flood(&mut d.tcp(Framing::LengthPrefix));
+    flood(&mut d.tcp(Framing::Slip));
     d.wire.assert_continuous_since(before, "through the flood");
     // Still serving: the live look is what it was.
     let live = d.live();

@@ -287,6 +287,7 @@ impl Server {
             refused_log: Mutex::default(),
             not_osc_log: Mutex::default(),
             busy_log: Mutex::default(),
+            peer_log: Mutex::default(),
         });
         let mut server = Server {
             udp_addr: None,
@@ -395,6 +396,7 @@ struct Shared {
     refused_log: Mutex<Throttle>,
     not_osc_log: Mutex<Throttle>,
     busy_log: Mutex<Throttle>,
+    peer_log: Mutex<Throttle>,
 }
 
 impl Shared {
@@ -745,10 +747,12 @@ async fn outgoing(route: Arc<PeerRoute>, queue: Queue, framing: Framing, shared:
                 Ok(Err(e)) => plain(&e),
                 _ => format!("no answer within {PEER_CONNECT:?}"),
             };
-            warn!(
-                "OSC: cannot reach peer `{}` at {to} ({why}); its replies and pushes are lost until it connects or the next one",
-                route.name
-            );
+            if let Some(n) = throttled(&shared.peer_log) {
+                warn!(
+                    "OSC: cannot reach peer `{}` at {to} ({why}); its replies and pushes are lost until it connects or visobjd reaches it ({n} failed since the last report)",
+                    route.name
+                );
+            }
             let mut slot = route.link.lock().unwrap_or_else(|p| p.into_inner());
             if slot.as_ref().is_some_and(|l| l.same(&queue.link(framing))) {
                 *slot = None;
