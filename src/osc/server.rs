@@ -211,6 +211,21 @@ impl Link {
     }
 }
 
+impl PeerRoute {
+    /// Makes `link` the connection the peer's replies and pushes go on.
+    fn attach(&self, link: &Link) {
+        *self.link.lock().unwrap_or_else(|p| p.into_inner()) = Some(link.clone());
+    }
+
+    /// Forgets `link` if it is still the peer's connection (it closed or never opened).
+    fn detach(&self, link: &Link) {
+        let mut slot = self.link.lock().unwrap_or_else(|p| p.into_inner());
+        if slot.as_ref().is_some_and(|l| l.same(link)) {
+            *slot = None;
+        }
+    }
+}
+
 /// A TCP connection's reply queue before its task runs: the way in (for a [`Link`]), the
 /// way out (drained by the task) and its kill switch.
 struct Queue {
@@ -753,10 +768,7 @@ async fn outgoing(route: Arc<PeerRoute>, queue: Queue, framing: Framing, shared:
                     route.name
                 );
             }
-            let mut slot = route.link.lock().unwrap_or_else(|p| p.into_inner());
-            if slot.as_ref().is_some_and(|l| l.same(&queue.link(framing))) {
-                *slot = None;
-            }
+            route.detach(&queue.link(framing));
         }
     }
 }
@@ -779,7 +791,7 @@ async fn connection(
     let route = shared.routes.tcp(from.ip()).cloned();
     let mut link = framing.map(|f| queue.link(f));
     if let (Some(route), Some(link)) = (&route, &link) {
-        *route.link.lock().unwrap_or_else(|p| p.into_inner()) = Some(link.clone());
+        route.attach(link);
     }
     let Queue {
         queue: tx,
@@ -821,7 +833,7 @@ async fn connection(
                     let new = Link { queue: tx.clone(), framing, kill: kill.clone() };
                     // A TCP peer's own connection carries its pushes from now on.
                     if let Some(route) = &route {
-                        *route.link.lock().unwrap_or_else(|p| p.into_inner()) = Some(new.clone());
+                        route.attach(&new);
                     }
                     link = Some(new);
                 }
@@ -874,10 +886,7 @@ async fn connection(
         }
     };
     if let (Some(route), Some(link)) = (&route, &link) {
-        let mut slot = route.link.lock().unwrap_or_else(|p| p.into_inner());
-        if slot.as_ref().is_some_and(|l| l.same(link)) {
-            *slot = None;
-        }
+        route.detach(link);
     }
     debug!("OSC over TCP: {from} disconnected: {why}");
 }
