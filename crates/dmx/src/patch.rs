@@ -602,6 +602,27 @@ mod tests {
     }
 
     #[test]
+    fn light_slots_are_the_wire_bytes() {
+        let scene = scene();
+        let patch = Patch::new(&scene);
+        let frame = patch.unmastered(&look(&scene, 0.6237, [1.0, 0.8, 0.3]));
+        let bytes = patch.quantise(&frame);
+        for (light, slots) in patch.lights.iter().zip(patch.light_slots(&frame)) {
+            let mut at = light.offset;
+            for (slot, v) in slots {
+                let dmx = &bytes[light.universe];
+                let want = if slot == Slot::Intensity16 {
+                    (f32::from(dmx[at]) * 256.0 + f32::from(dmx[at + 1])) / 65535.0
+                } else {
+                    f32::from(dmx[at]) / 255.0
+                };
+                assert_eq!(v, want, "{slot:?} at {at}");
+                at += slot.width();
+            }
+        }
+    }
+
+    #[test]
     fn a_missing_universe_is_dark() {
         let scene = scene();
         let patch = Patch::new(&scene);
