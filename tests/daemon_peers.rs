@@ -229,3 +229,54 @@ fn bad_peers_are_refused_at_start() {
         assert!(err.contains(says), "{says}: {err}");
     }
 }
+
+#[test]
+fn an_unreachable_tcp_peer_costs_nobody_else_anything() {
+    // A port nothing listens on: every connection to it is refused.
+    let closed = TcpListener::bind((CONSOLE, 0))
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let probe = Tablet::new("127.0.0.1:9".parse().unwrap());
+    let mut d = Daemon::start_setup(
+        "peers-unreachable",
+        Setup {
+            extra: peers(probe.port(), closed, "tcp"),
+            ..Setup::default()
+        },
+    );
+    let tablet = Tablet {
+        daemon: SocketAddr::new(d.setup.udp, d.port),
+        ..probe
+    };
+    let console = UdpSocket::bind((CONSOLE, 0)).unwrap();
+    for i in 0..200 {
+        let bytes =
+            rosc::encoder::encode(&msg("/vo/master", vec![float(i as f32 / 200.0)])).unwrap();
+        console.send_to(&bytes, (d.setup.udp, d.port)).unwrap();
+    }
+    // Everyone else is still served, and the console's commands ran.
+    tablet.send("/vo/ping", vec![string("still here")]);
+    tablet.until("/vo/pong", &[string("still here")]);
+    let end = Instant::now() + PATIENCE;
+    loop {
+        let r = d.ok("/vo/status", vec![], "/vo/status");
+        let master = match r.args[8] {
+            OscType::Float(m) => m,
+            ref other => panic!("master: {other:?}"),
+        };
+        if (master - 199.0 / 200.0).abs() < 1e-6 {
+            break;
+        }
+        assert!(
+            Instant::now() < end,
+            "the console's last master never ran: {master}"
+        );
+    }
+    // And the daemon says why the console hears nothing.
+    while !d.log().contains("cannot reach peer `eos`") {
+        assert!(Instant::now() < end, "no warning: {}", d.log());
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
