@@ -81,6 +81,8 @@ pub struct OscConfig {
     pub reply_port: u16,
     /// Senders allowed (addresses or CIDR blocks); empty: loopback only.
     pub allow: Vec<String>,
+    /// `[[osc.peer]]`: where known clients get their replies and pushes.
+    pub peer: Vec<crate::osc::peers::PeerConfig>,
 }
 
 impl Default for OscConfig {
@@ -90,6 +92,7 @@ impl Default for OscConfig {
             tcp: "127.0.0.1:8000".into(),
             reply_port: 0,
             allow: Vec::new(),
+            peer: Vec::new(),
         }
     }
 }
@@ -243,9 +246,13 @@ impl Config {
                 )));
             }
         }
-        for a in &file.osc.allow {
-            Cidr::parse(a).map_err(|e| at(format!("osc.allow: {e}")))?;
-        }
+        let allow = file
+            .osc
+            .allow
+            .iter()
+            .map(|a| Cidr::parse(a).map_err(|e| at(format!("osc.allow: {e}"))))
+            .collect::<Result<Vec<_>, _>>()?;
+        crate::osc::peers::validate(&file.osc.peer, &allow).map_err(at)?;
         let g = &file.generate;
         let checks = [
             (
@@ -285,7 +292,7 @@ impl Config {
         if let Some((_, m)) = checks.iter().find(|(ok, _)| !ok) {
             return Err(at((*m).to_string()));
         }
-        file.eos.console().map_err(at)?;
+        file.eos.validate().map_err(at)?;
         if let Some(sacn) = &file.input.sacn {
             sacn.addresses().map_err(at)?;
         }

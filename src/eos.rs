@@ -2,14 +2,18 @@
 //! console's command line, recorded as a preset, so the programmer keeps the result in the
 //! show file (paper 5.3).
 //!
-//! Everything goes through Eos's documented OSC command line (`/eos/newcmd`, one command
-//! each, terminated with `Enter`):
+//! Everything goes through Eos's documented OSC command line as a user of its own
+//! (`/eos/user/<n>/newcmd`, one command each, terminated with `Enter`), so the
+//! programmer's command line is never touched:
 //!
 //! ```text
-//! Chan 12 At 62 Enter                       intensity, percent (one decimal)
-//! Chan 12 Red 100 Green 55 Blue 20 Enter    colour lights: emitter levels, percent
+//! Chan 12 At 62.375 Enter                   intensity, percent (16-bit: three decimals)
+//! Chan 12 Red 100 Green 21.6 Blue 0 White 5.1 Enter    every colour parameter the patch drives
 //! Chan 1 Thru 44 Record Preset 5 Enter      the lights of the look, recorded
 //! ```
+//!
+//! The levels are the DMX output's own ([`Patch::light_slots`] at master 1), so recalling
+//! the preset puts the same slots on the wire as visobjd did.
 
 use std::io::Write;
 use std::net::{SocketAddr, TcpStream, UdpSocket};
@@ -19,11 +23,16 @@ use rosc::{OscMessage, OscPacket, OscType};
 use serde::Deserialize;
 
 use crate::osc::framing::{self, Framing};
+use visobjd_dmx::patch::Patch;
 use visobjd_scene::Scene;
 use visobjd_scene::look::Look;
+use visobjd_scene::profile::Slot;
 
 /// How long connecting to and writing to the console may take.
 const TIMEOUT: Duration = Duration::from_secs(3);
+
+/// The Eos users an OSC command may run as: Eos devices take user IDs 1..=99.
+const USERS: std::ops::RangeInclusive<u32> = 1..=99;
 
 /// How the console is reached (its OSC settings: UDP, or TCP with either framing).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
@@ -45,6 +54,9 @@ pub struct EosConfig {
     pub address: String,
     /// How to reach it.
     pub protocol: Protocol,
+    /// The Eos user the export types as: one nobody works on, so no command line in use
+    /// is cleared or added to.
+    pub user: u32,
 }
 
 impl Default for EosConfig {
@@ -52,11 +64,25 @@ impl Default for EosConfig {
         EosConfig {
             address: String::new(),
             protocol: Protocol::Tcp,
+            user: 90,
         }
     }
 }
 
 impl EosConfig {
+    /// Checks every key; Err names the bad one.
+    pub fn validate(&self) -> Result<(), String> {
+        if !USERS.contains(&self.user) {
+            return Err(format!(
+                "eos.user must be {}..={} (an Eos user ID), got {}",
+                USERS.start(),
+                USERS.end(),
+                self.user
+            ));
+        }
+        self.console().map(drop)
+    }
+
     /// The console's address, None when export is off; Err names the bad value.
     pub fn console(&self) -> Result<Option<SocketAddr>, String> {
         if self.address.trim().is_empty() {
@@ -69,31 +95,56 @@ impl EosConfig {
             )
         })
     }
+
+    /// The OSC address every command line is sent to.
+    pub fn command_address(&self) -> String {
+        format!("/eos/user/{}/newcmd", self.user)
+    }
 }
 
-/// The command lines that put `look` on the console and record it as preset `n`.
+/// The Eos parameter a slot drives, None for slots the export leaves out (intensity has
+/// its own `At`; `uv` is always 0 and `fixed:N` is the fixture's, not the look's).
+fn parameter(slot: Slot) -> Option<&'static str> {
+    Some(match slot {
+        Slot::Red => "Red",
+        Slot::Green => "Green",
+        Slot::Blue => "Blue",
+        Slot::White => "White",
+        Slot::Amber => "Amber",
+        Slot::Lime => "Lime",
+        Slot::Cyan => "Cyan",
+        Slot::Magenta => "Magenta",
+        Slot::Yellow => "Yellow",
+        Slot::Intensity | Slot::Intensity16 | Slot::Uv | Slot::Fixed(_) => return None,
+    })
+}
+
+/// The command lines that put `look` on the console and record it as preset `n`: per
+/// light its intensity (`At 100` for a light without a dimmer, whose emitters carry its
+/// intensity) and every colour parameter its profile drives, at the levels the DMX output
+/// sends at master 1.
 pub fn preset_commands(scene: &Scene, look: &Look, n: u32) -> Vec<String> {
+    let patch = Patch::new(scene);
+    let slots = patch.light_slots(&patch.unmastered(look));
     let mut cmds = Vec::with_capacity(scene.lights.len() * 2 + 1);
-    for (l, (light, level)) in scene.lights.iter().zip(&look.levels).enumerate() {
-        cmds.push(format!(
-            "Chan {} At {} Enter",
-            light.channel,
-            percent(level.intensity)
-        ));
-        if scene.profile(l).has_colour() {
-            // Emitter levels at full: the same linear multiplier the DMX output uses.
-            let c = visobjd_scene::look::Level {
-                intensity: 1.0,
-                ..*level
-            }
-            .multiplier();
-            cmds.push(format!(
-                "Chan {} Red {} Green {} Blue {} Enter",
-                light.channel,
-                percent(c[0]),
-                percent(c[1]),
-                percent(c[2])
-            ));
+    for (light, slots) in scene.lights.iter().zip(&slots) {
+        let ch = light.channel;
+        let dimmer = slots.iter().find_map(|&(s, v)| match s {
+            Slot::Intensity => Some(percent(v, 1)),
+            Slot::Intensity16 => Some(percent(v, 3)),
+            _ => None,
+        });
+        let colour: Vec<String> = slots
+            .iter()
+            .filter_map(|&(s, v)| parameter(s).map(|p| format!("{p} {}", percent(v, 1))))
+            .collect();
+        match (dimmer, colour.is_empty()) {
+            (Some(at), _) => cmds.push(format!("Chan {ch} At {at} Enter")),
+            (None, false) => cmds.push(format!("Chan {ch} At 100 Enter")),
+            (None, true) => {}
+        }
+        if !colour.is_empty() {
+            cmds.push(format!("Chan {ch} {} Enter", colour.join(" ")));
         }
     }
     let channels: Vec<u32> = scene.lights.iter().map(|l| l.channel).collect();
@@ -104,14 +155,17 @@ pub fn preset_commands(scene: &Scene, look: &Look, n: u32) -> Vec<String> {
     cmds
 }
 
-/// A level as Eos takes it: percent with at most one decimal, no trailing ".0".
-fn percent(v: f32) -> String {
-    let p = (v.clamp(0.0, 1.0) * 1000.0).round() / 10.0;
-    if p.fract() == 0.0 {
-        format!("{}", p as u32)
+/// A level as Eos takes it: percent with at most `decimals` decimals, no trailing zeros.
+/// One decimal is within a tenth of an 8-bit step (0.39%), three within a third of a
+/// 16-bit step (0.0015%), so the console's own rounding lands on the same DMX value.
+fn percent(v: f32, decimals: usize) -> String {
+    let p = format!("{:.*}", decimals, f64::from(v.clamp(0.0, 1.0)) * 100.0);
+    let p = if p.contains('.') {
+        p.trim_end_matches('0').trim_end_matches('.')
     } else {
-        format!("{p:.1}")
-    }
+        &p
+    };
+    p.to_string()
 }
 
 /// Ascending channels as an Eos selection: runs become `Thru`, the rest are joined by `+`.
@@ -135,13 +189,14 @@ pub fn channel_list(channels: &[u32]) -> String {
     parts.join(" + ")
 }
 
-/// Sends the command lines to the console as `/eos/newcmd` messages, in order.
+/// Sends the command lines to the console as `/eos/user/<n>/newcmd` messages, in order.
 pub fn push(config: &EosConfig, to: SocketAddr, commands: &[String]) -> Result<(), String> {
+    let addr = config.command_address();
     let packets = commands
         .iter()
         .map(|c| {
             rosc::encoder::encode(&OscPacket::Message(OscMessage {
-                addr: "/eos/newcmd".into(),
+                addr: addr.clone(),
                 args: vec![OscType::String(c.clone())],
             }))
             .map_err(|e| format!("cannot encode `{c}`: {e}"))
@@ -191,11 +246,25 @@ mod tests {
     }
 
     #[test]
-    fn percents_have_at_most_one_decimal() {
-        assert_eq!(percent(0.62), "62");
-        assert_eq!(percent(0.625), "62.5");
-        assert_eq!(percent(1.0), "100");
-        assert_eq!(percent(0.0), "0");
-        assert_eq!(percent(2.0), "100");
+    fn percents_have_their_decimals_without_trailing_zeros() {
+        assert_eq!(percent(0.62, 1), "62");
+        assert_eq!(percent(0.625, 1), "62.5");
+        assert_eq!(percent(1.0, 1), "100");
+        assert_eq!(percent(0.0, 3), "0");
+        assert_eq!(percent(2.0, 1), "100");
+        assert_eq!(percent(40_876.0 / 65_535.0, 3), "62.373");
+    }
+
+    #[test]
+    fn users_are_checked() {
+        let bad = EosConfig {
+            user: 0,
+            ..EosConfig::default()
+        };
+        assert!(bad.validate().unwrap_err().contains("eos.user"));
+        assert_eq!(
+            EosConfig::default().command_address(),
+            "/eos/user/90/newcmd"
+        );
     }
 }

@@ -415,7 +415,7 @@ fn check_fits_a_small_screen_and_names_the_web_gallery_and_console() {
         "{text}"
     );
     assert!(
-        text.contains("eos      presets to 10.101.0.5:3032 over tcp-slip"),
+        text.contains("eos      presets to 10.101.0.5:3032 over tcp-slip (OSC 1.1) as user 90"),
         "{text}"
     );
     assert!(

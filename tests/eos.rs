@@ -33,19 +33,20 @@ fn a_44_light_look_arrives_as_exact_command_lines() {
     let config = EosConfig {
         address: console.local_addr().unwrap().to_string(),
         protocol: Protocol::Tcp,
+        ..EosConfig::default()
     };
     let commands = preset_commands(&scene, &look, 7);
     push(&config, console.local_addr().unwrap(), &commands).unwrap();
     let (mut stream, _) = console.accept().unwrap();
     let mut bytes = Vec::new();
     stream.read_to_end(&mut bytes).unwrap();
-    // Length-prefixed packets, each an /eos/newcmd with one string.
+    // Length-prefixed packets, each a command line of Eos user 90 (the default).
     let mut lines = Vec::new();
     let mut rest = bytes.as_slice();
     while !rest.is_empty() {
         let n = u32::from_be_bytes([rest[0], rest[1], rest[2], rest[3]]) as usize;
         match rosc::decoder::decode_udp(&rest[4..4 + n]).unwrap().1 {
-            OscPacket::Message(m) if m.addr == "/eos/newcmd" => match m.args.as_slice() {
+            OscPacket::Message(m) if m.addr == "/eos/user/90/newcmd" => match m.args.as_slice() {
                 [OscType::String(s)] => lines.push(s.clone()),
                 other => panic!("{other:?}"),
             },
@@ -56,19 +57,30 @@ fn a_44_light_look_arrives_as_exact_command_lines() {
     let colour = (0..44).filter(|&i| scene.profile(i).has_colour()).count();
     assert_eq!(lines.len(), 44 + colour + 1);
     assert_eq!(lines[0], "Chan 1 At 0 Enter");
+    // Levels are the wire's: 8-bit bytes as percent with one decimal.
+    let has = |l: &str| assert!(lines.contains(&l.to_string()), "{l}: {lines:?}");
+    // Channel 22 is an rgb light at 21/43: no dimmer, so intensity is folded into the
+    // emitters (bytes 125, 27, 0) and the channel's own intensity stays at full.
+    has("Chan 22 At 100 Enter");
+    has("Chan 22 Red 49 Green 10.6 Blue 0 Enter");
+    // sRGB 0.5 is byte 55 (21.6%) behind a dimmer, as on DMX; rgbw adds its white.
+    let first = |p: &str| {
+        let i = (0..44).find(|&i| scene.profile(i).name == p).unwrap();
+        (scene.lights[i].channel, i)
+    };
+    let (ch, i) = first("irgb");
+    has(&format!("Chan {ch} Red 100 Green 21.6 Blue 0 Enter"));
+    let byte = ((i as f32 / 43.0) * 255.0).round();
+    let at = format!("{:.1}", byte / 2.55);
+    has(&format!(
+        "Chan {ch} At {} Enter",
+        at.trim_end_matches('0').trim_end_matches('.')
+    ));
+    let (ch, _) = first("rgbw");
     assert!(
-        lines.contains(&"Chan 44 At 100 Enter".to_string()),
-        "{lines:?}"
-    );
-    assert!(
-        lines.contains(&"Chan 22 At 48.8 Enter".to_string()),
-        "{lines:?}"
-    );
-    // sRGB 0.5 is 21.4% emitter level (linear), as on DMX.
-    let first_colour = (0..44).find(|&i| scene.profile(i).has_colour()).unwrap();
-    let ch = scene.lights[first_colour].channel;
-    assert!(
-        lines.contains(&format!("Chan {ch} Red 100 Green 21.4 Blue 0 Enter")),
+        lines
+            .iter()
+            .any(|l| l.starts_with(&format!("Chan {ch} Red ")) && l.ends_with(" White 0 Enter")),
         "{lines:?}"
     );
     assert_eq!(

@@ -92,6 +92,7 @@ fn loopback() -> OscConfig {
         tcp: "127.0.0.1:0".into(),
         reply_port: 0,
         allow: vec![],
+        peer: vec![],
     }
 }
 

@@ -121,12 +121,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "eos",
         match config.eos.console() {
             Ok(Some(addr)) => format!(
-                "presets to {addr} over {}",
+                "presets to {addr} over {} as user {}",
                 match config.eos.protocol {
                     crate::eos::Protocol::Udp => "udp",
                     crate::eos::Protocol::Tcp => "tcp (OSC 1.0)",
                     crate::eos::Protocol::TcpSlip => "tcp-slip (OSC 1.1)",
-                }
+                },
+                config.eos.user
             ),
             _ => "off".to_string(),
         },

@@ -7,6 +7,7 @@
 
 mod console;
 mod constraint;
+mod eos_in;
 mod gallery;
 mod generate;
 mod live;
@@ -28,6 +29,7 @@ use visobjd_scene::look::Look;
 
 /// Every command the daemon understands.
 enum Command {
+    EosIn(eos_in::Cmd),
     Objective(objective::Cmd),
     Constraint(constraint::Cmd),
     Console(console::Cmd),
@@ -41,6 +43,9 @@ enum Command {
 
 impl Command {
     fn parse(req: &Request) -> Result<Command, String> {
+        if let Some(c) = eos_in::Cmd::parse(req)? {
+            return Ok(Command::EosIn(c));
+        }
         if let Some(c) = objective::Cmd::parse(req)? {
             return Ok(Command::Objective(c));
         }
@@ -77,6 +82,7 @@ impl Command {
     /// The address family, for [`parse`]'s callers.
     fn family(&self) -> &'static str {
         match self {
+            Command::EosIn(_) => "eos",
             Command::Objective(_) => "objective",
             Command::Constraint(_) => "constraint",
             Command::Console(_) => "console",
@@ -91,6 +97,7 @@ impl Command {
 
     fn apply(self, e: &Arc<Engine>, peer: &Peer) -> Result<Vec<OscMessage>, String> {
         match self {
+            Command::EosIn(c) => c.apply(e),
             Command::Objective(c) => c.apply(e),
             Command::Constraint(c) => c.apply(e),
             Command::Console(c) => c.apply(e),

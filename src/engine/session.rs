@@ -81,6 +81,8 @@ pub struct Session {
     pub locked_groups: Vec<bool>,
     /// Per light: locked.
     pub locked_lights: Vec<bool>,
+    /// The lights an Eos console last reported selected (`/eos/out/active/chan`).
+    pub console_selection: Vec<usize>,
     /// Candidates per generate.
     pub count: u32,
     /// Entries at most.
@@ -121,6 +123,7 @@ impl Session {
             key_groups: vec![false; scene.groups.len()],
             locked_groups: vec![false; scene.groups.len()],
             locked_lights: vec![false; lights],
+            console_selection: Vec::new(),
             count,
             clusters,
             seed: 0,

@@ -20,6 +20,7 @@ pub const TRIGGERS: &[&str] = &[
     "/vo/live",
     "/vo/looks",
     "/vo/status",
+    "/vo/console/selection",
     "/vo/objectives",
     "/vo/objective/clear",
     "/vo/console/grab",

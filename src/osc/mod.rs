@@ -14,6 +14,7 @@
 pub mod args;
 pub mod framing;
 pub mod packet;
+pub mod peers;
 pub mod server;
 
 pub use server::{Handler, Limits, Peer, Sender, Server, Transport};

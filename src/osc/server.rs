@@ -11,7 +11,7 @@ use std::collections::{HashMap, VecDeque};
 use std::net::SocketAddr;
 use std::panic::AssertUnwindSafe;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, Weak};
 use std::time::{Duration, Instant};
 
 use rosc::{OscMessage, OscPacket, OscType};
@@ -25,6 +25,7 @@ use tracing::{debug, error, info, trace, warn};
 use super::args::Request;
 use super::framing::{self, Decoder, Frame, Framing};
 use super::packet::{self, Item, PacketError};
+use super::peers::{Route as PeerRoute, Routes};
 use crate::config::{Cidr, OscConfig};
 
 /// What the engine implements to answer OSC.
@@ -155,16 +156,24 @@ impl Peer {
 }
 
 /// Sends OSC from the server's UDP socket (so replies come from the port clients talk to),
-/// to any address: for pushes such as subscriptions.
+/// to any address: for pushes such as subscriptions. A `[[osc.peer]]` that takes TCP gets
+/// them on its connection instead ([`super::peers`]).
 #[derive(Clone, Debug)]
 pub struct Sender {
     socket: Arc<UdpSocket>,
+    /// Weak: the handler (the engine) holds a sender, and the server state holds it.
+    shared: Weak<Shared>,
 }
 
 impl Sender {
     /// Sends one message now, without waiting; an error says why it did not go (including
     /// a full socket buffer).
     pub fn send(&self, to: SocketAddr, msg: &OscMessage) -> Result<(), String> {
+        if let Some(shared) = self.shared.upgrade()
+            && let Some(route) = shared.routes.tcp(to.ip())
+        {
+            return shared.send_tcp(route, msg);
+        }
         let bytes = encode_datagram(msg)?;
         self.socket
             .try_send_to(&bytes, to)
@@ -175,7 +184,7 @@ impl Sender {
 
 /// One TCP connection's way back: a bounded queue drained by the connection's task.
 #[derive(Clone, Debug)]
-struct Link {
+pub(super) struct Link {
     queue: mpsc::Sender<Vec<u8>>,
     framing: Framing,
     kill: Arc<Notify>,
@@ -195,7 +204,57 @@ impl Link {
             Err(mpsc::error::TrySendError::Closed(_)) => false,
         }
     }
+
+    /// Whether `self` and `other` are the same connection's.
+    fn same(&self, other: &Link) -> bool {
+        Arc::ptr_eq(&self.kill, &other.kill)
+    }
 }
+
+impl PeerRoute {
+    /// Makes `link` the connection the peer's replies and pushes go on.
+    fn attach(&self, link: &Link) {
+        *self.link.lock().unwrap_or_else(|p| p.into_inner()) = Some(link.clone());
+    }
+
+    /// Forgets `link` if it is still the peer's connection (it closed or never opened).
+    fn detach(&self, link: &Link) {
+        let mut slot = self.link.lock().unwrap_or_else(|p| p.into_inner());
+        if slot.as_ref().is_some_and(|l| l.same(link)) {
+            *slot = None;
+        }
+    }
+}
+
+/// A TCP connection's reply queue before its task runs: the way in (for a [`Link`]), the
+/// way out (drained by the task) and its kill switch.
+struct Queue {
+    queue: mpsc::Sender<Vec<u8>>,
+    queued: mpsc::Receiver<Vec<u8>>,
+    kill: Arc<Notify>,
+}
+
+impl Queue {
+    fn new(limits: &Limits) -> Queue {
+        let (queue, queued) = mpsc::channel::<Vec<u8>>(limits.reply_queue.max(1));
+        Queue {
+            queue,
+            queued,
+            kill: Arc::new(Notify::new()),
+        }
+    }
+
+    fn link(&self, framing: Framing) -> Link {
+        Link {
+            queue: self.queue.clone(),
+            framing,
+            kill: self.kill.clone(),
+        }
+    }
+}
+
+/// How long visobjd tries to open a TCP connection to a `[[osc.peer]]`.
+const PEER_CONNECT: Duration = Duration::from_secs(3);
 
 /// The running listeners. Dropping it (or [`Server::stop`]) stops them; [`Sender`] handles
 /// keep the UDP socket open until they are dropped too.
@@ -228,9 +287,12 @@ impl Server {
             .iter()
             .map(|a| Cidr::parse(a).map_err(|e| format!("osc.allow: {e}")))
             .collect::<Result<Vec<_>, _>>()?;
+        super::peers::validate(&config.peer, &allow)?;
         let shared = Arc::new(Shared {
             handler,
             allow,
+            routes: Routes::new(&config.peer),
+            runtime: Handle::current(),
             reply_port: config.reply_port,
             limits,
             refused: AtomicU64::new(0),
@@ -240,6 +302,7 @@ impl Server {
             refused_log: Mutex::default(),
             not_osc_log: Mutex::default(),
             busy_log: Mutex::default(),
+            peer_log: Mutex::default(),
         });
         let mut server = Server {
             udp_addr: None,
@@ -257,7 +320,10 @@ impl Server {
                 .local_addr()
                 .map_err(|e| format!("osc.udp {addr}: {}", plain(&e)))?;
             info!("OSC over UDP on {local}");
-            let sender = Sender { socket };
+            let sender = Sender {
+                socket,
+                shared: Arc::downgrade(&shared),
+            };
             server.udp_addr = Some(local);
             server.sender = Some(sender.clone());
             server
@@ -333,6 +399,9 @@ impl Drop for Server {
 struct Shared {
     handler: Arc<dyn Handler>,
     allow: Vec<Cidr>,
+    /// `[[osc.peer]]`.
+    routes: Routes,
+    runtime: Handle,
     reply_port: u16,
     limits: Limits,
     refused: AtomicU64,
@@ -342,6 +411,7 @@ struct Shared {
     refused_log: Mutex<Throttle>,
     not_osc_log: Mutex<Throttle>,
     busy_log: Mutex<Throttle>,
+    peer_log: Mutex<Throttle>,
 }
 
 impl Shared {
@@ -357,11 +427,42 @@ impl Shared {
         ok
     }
 
+    /// Where UDP replies and pushes to `from` go: its `[[osc.peer]]` port, else the
+    /// global rule.
     fn reply_addr(&self, from: SocketAddr) -> SocketAddr {
+        if let Some(to) = self.routes.reply_addr(from) {
+            return to;
+        }
         match self.reply_port {
             0 => from,
             port => SocketAddr::new(from.ip(), port),
         }
+    }
+
+    /// Sends to a TCP peer on its open connection, or opens one (on a task of its own, the
+    /// message queued meanwhile). Never waits.
+    fn send_tcp(self: &Arc<Self>, route: &Arc<PeerRoute>, msg: &OscMessage) -> Result<(), String> {
+        let framing = route.framing.unwrap_or(Framing::LengthPrefix);
+        let mut slot = route.link.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some(link) = slot.as_ref() {
+            if link.send(msg) {
+                return Ok(());
+            }
+            *slot = None;
+        }
+        let queue = Queue::new(&self.limits);
+        let link = queue.link(framing);
+        if !link.send(msg) {
+            return Err(format!(
+                "cannot encode {} for peer `{}`",
+                msg.addr, route.name
+            ));
+        }
+        *slot = Some(link);
+        drop(slot);
+        self.runtime
+            .spawn(outgoing(route.clone(), queue, framing, self.clone()));
+        Ok(())
     }
 
     /// Runs one packet's messages through the handler, returning the replies in order.
@@ -579,8 +680,18 @@ async fn serve_sender(from: SocketAddr, backlogs: Backlogs, sender: Sender, shar
             (shared.clone(), peer.clone(), Handle::current());
         let socket = sender.socket.clone();
         let handled = tokio::task::spawn_blocking(move || {
+            let to_tcp = handler_shared
+                .routes
+                .tcp(handler_peer.reply_addr.ip())
+                .cloned();
             for bytes in batch {
                 for reply in handler_shared.dispatch(&bytes, &handler_peer) {
+                    if let Some(route) = &to_tcp {
+                        if let Err(e) = handler_shared.send_tcp(route, &reply) {
+                            debug!("OSC: reply to peer `{}` not sent: {e}", route.name);
+                        }
+                        continue;
+                    }
                     let bytes = match encode_datagram(&reply) {
                         Ok(bytes) => bytes,
                         Err(e) => {
@@ -622,7 +733,8 @@ async fn tcp_loop(listener: TcpListener, shared: Arc<Shared>) {
                         }
                         continue;
                     }
-                    conns.spawn(connection(stream, from, shared.clone()));
+                    let queue = Queue::new(&shared.limits);
+                    conns.spawn(connection(stream, from, shared.clone(), queue, None));
                 }
                 Err(e) => {
                     if let Some(n) = throttled(&shared.busy_log) {
@@ -636,15 +748,56 @@ async fn tcp_loop(listener: TcpListener, shared: Arc<Shared>) {
     }
 }
 
+/// Opens visobjd's own connection to a TCP `[[osc.peer]]` and serves it like one the peer
+/// opened (what it sends is heard), replies going out in the peer's framing.
+async fn outgoing(route: Arc<PeerRoute>, queue: Queue, framing: Framing, shared: Arc<Shared>) {
+    let to = SocketAddr::new(route.ip, route.port);
+    match tokio::time::timeout(PEER_CONNECT, TcpStream::connect(to)).await {
+        Ok(Ok(stream)) => {
+            debug!("OSC over TCP: connected to peer `{}` at {to}", route.name);
+            connection(stream, to, shared, queue, Some(framing)).await;
+        }
+        failed => {
+            let why = match failed {
+                Ok(Err(e)) => plain(&e),
+                _ => format!("no answer within {PEER_CONNECT:?}"),
+            };
+            if let Some(n) = throttled(&shared.peer_log) {
+                warn!(
+                    "OSC: cannot reach peer `{}` at {to} ({why}); its replies and pushes are lost until it connects or visobjd reaches it ({n} failed since the last report)",
+                    route.name
+                );
+            }
+            route.detach(&queue.link(framing));
+        }
+    }
+}
+
 /// Serves one TCP connection until it closes, idles out, or lets its reply queue overflow.
-async fn connection(stream: TcpStream, from: SocketAddr, shared: Arc<Shared>) {
+/// `framing` is the replies' when visobjd opened it (a peer's); otherwise the client's
+/// first byte decides. A `[[osc.peer]]` that takes TCP gets its pushes on it meanwhile.
+async fn connection(
+    stream: TcpStream,
+    from: SocketAddr,
+    shared: Arc<Shared>,
+    queue: Queue,
+    framing: Option<Framing>,
+) {
     debug!("OSC over TCP: {from} connected");
     // Small replies should not wait for Nagle; failing to set it only costs latency.
     let _ = stream.set_nodelay(true);
     let (mut rd, mut wr) = stream.into_split();
     let limits = shared.limits;
-    let (queue, mut queued) = mpsc::channel::<Vec<u8>>(limits.reply_queue.max(1));
-    let kill = Arc::new(Notify::new());
+    let route = shared.routes.tcp(from.ip()).cloned();
+    let mut link = framing.map(|f| queue.link(f));
+    if let (Some(route), Some(link)) = (&route, &link) {
+        route.attach(link);
+    }
+    let Queue {
+        queue: tx,
+        mut queued,
+        kill,
+    } = queue;
     let mut decoder = Decoder::new(limits.max_frame);
     let mut buf = vec![0u8; 8192];
     let mut frames = Vec::new();
@@ -674,7 +827,18 @@ async fn connection(stream: TcpStream, from: SocketAddr, shared: Arc<Shared>) {
                     Ok(Ok(n)) => n,
                 };
                 decoder.feed(&buf[..n], &mut frames);
-                let Some(framing) = decoder.framing() else { continue };
+                if link.is_none()
+                    && let Some(framing) = decoder.framing()
+                {
+                    let new = Link { queue: tx.clone(), framing, kill: kill.clone() };
+                    // A TCP peer's own connection carries its pushes from now on.
+                    if let Some(route) = &route {
+                        route.attach(&new);
+                    }
+                    link = Some(new);
+                }
+                let Some(link) = link.clone() else { continue };
+                let framing = link.framing;
                 if frames.is_empty() {
                     continue;
                 }
@@ -682,7 +846,7 @@ async fn connection(stream: TcpStream, from: SocketAddr, shared: Arc<Shared>) {
                 let peer = Peer {
                     addr: from,
                     reply_addr: shared.reply_addr(from),
-                    route: Route::Tcp(Link { queue: queue.clone(), framing, kill: kill.clone() }),
+                    route: Route::Tcp(link.clone()),
                 };
                 // Handled on a blocking thread: a save waiting on the disk holds only this
                 // connection, not the runtime's workers.
@@ -707,12 +871,23 @@ async fn connection(stream: TcpStream, from: SocketAddr, shared: Arc<Shared>) {
                 })
                 .await
                 .unwrap_or_default();
+                // Pushes queued while these were handled (a subscription's state) go
+                // first, in the order they were made, as they would over UDP.
+                let mut pushed = Vec::new();
+                while let Ok(bytes) = queued.try_recv() {
+                    pushed.extend(bytes);
+                }
+                pushed.extend(out);
+                let out = pushed;
                 if let Err(e) = write(&mut wr, &out, deadline).await {
                     break e;
                 }
             }
         }
     };
+    if let (Some(route), Some(link)) = (&route, &link) {
+        route.detach(link);
+    }
     debug!("OSC over TCP: {from} disconnected: {why}");
 }
 

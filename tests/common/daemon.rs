@@ -1295,10 +1295,9 @@ impl Daemon {
         SocketAddr::new(self.setup.tcp, self.port)
     }
 
-    /// A new TCP connection from `ip` (any loopback address) in `framing`.
-    pub fn tcp_from(&self, ip: IpAddr, framing: Framing) -> Tcp {
-        let stream = connect_from(ip, self.tcp_addr()).expect("TCP connect");
-        stream.set_nodelay(true).expect("nodelay");
+    /// A TCP connection the daemon opened (to a `[[osc.peer]]`), accepted by the test, read
+    /// and written in `framing`.
+    pub fn tcp_accepted(&self, stream: TcpStream, framing: Framing) -> Tcp {
         Tcp {
             stream,
             framing,
@@ -1306,6 +1305,13 @@ impl Daemon {
             queue: VecDeque::new(),
             log: self.log.clone(),
         }
+    }
+
+    /// A new TCP connection from `ip` (any loopback address) in `framing`.
+    pub fn tcp_from(&self, ip: IpAddr, framing: Framing) -> Tcp {
+        let stream = connect_from(ip, self.tcp_addr()).expect("TCP connect");
+        stream.set_nodelay(true).expect("nodelay");
+        self.tcp_accepted(stream, framing)
     }
 
     pub fn pid(&self) -> u32 {

@@ -273,14 +273,54 @@ impl Patch {
                 let levels = frame.universe(u);
                 let mut out = [0u8; SLOTS];
                 for (byte, &v) in out.iter_mut().zip(levels) {
-                    *byte = (unit(v) * 255.0).round() as u8;
+                    *byte = coarse(v);
                 }
                 for &o in &self.wide[u] {
-                    let v = (unit(levels[o]) * 65535.0).round() as u16;
+                    let v = fine(levels[o]);
                     out[o] = (v >> 8) as u8;
                     out[o + 1] = (v & 0xff) as u8;
                 }
                 out
+            })
+            .collect()
+    }
+}
+
+/// An 8-bit slot's byte for `level`.
+fn coarse(level: f32) -> u8 {
+    (unit(level) * 255.0).round() as u8
+}
+
+/// A 16-bit pair's value for `level`.
+fn fine(level: f32) -> u16 {
+    (unit(level) * 65535.0).round() as u16
+}
+
+impl Patch {
+    /// Per light (scene order), each of its slots with the level the wire carries for it
+    /// in `frame` (unmastered levels), at DMX precision: `byte / 255`, or `value / 65535`
+    /// for a 16-bit pair. What a console export writes, so its preset and the wire can
+    /// never disagree.
+    pub fn light_slots(&self, frame: &Frame) -> Vec<Vec<(Slot, f32)>> {
+        self.lights
+            .iter()
+            .map(|light| {
+                let levels = frame.universe(light.universe);
+                let mut at = light.offset;
+                light
+                    .slots
+                    .iter()
+                    .map(|&slot| {
+                        let v = levels.get(at).copied().unwrap_or(0.0);
+                        at += slot.width();
+                        let v = if slot == Slot::Intensity16 {
+                            f32::from(fine(v)) / 65535.0
+                        } else {
+                            f32::from(coarse(v)) / 255.0
+                        };
+                        (slot, v)
+                    })
+                    .collect()
             })
             .collect()
     }
@@ -596,6 +636,27 @@ mod tests {
                         s.intensity
                     );
                 }
+            }
+        }
+    }
+
+    #[test]
+    fn light_slots_are_the_wire_bytes() {
+        let scene = scene();
+        let patch = Patch::new(&scene);
+        let frame = patch.unmastered(&look(&scene, 0.6237, [1.0, 0.8, 0.3]));
+        let bytes = patch.quantise(&frame);
+        for (light, slots) in patch.lights.iter().zip(patch.light_slots(&frame)) {
+            let mut at = light.offset;
+            for (slot, v) in slots {
+                let dmx = &bytes[light.universe];
+                let want = if slot == Slot::Intensity16 {
+                    (f32::from(dmx[at]) * 256.0 + f32::from(dmx[at + 1])) / 65535.0
+                } else {
+                    f32::from(dmx[at]) / 255.0
+                };
+                assert_eq!(v, want, "{slot:?} at {at}");
+                at += slot.width();
             }
         }
     }
