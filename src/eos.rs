@@ -103,7 +103,7 @@ impl EosConfig {
 }
 
 /// The Eos parameter a slot drives, None for slots the export leaves out (intensity has
-/// its own `At`; `uv` is always 0 and `fixed:N` is the fixture's, not the look's).
+/// its own `At`; `uv` is always 0, `fixed:N` is the fixture's, not the look's).
 fn parameter(slot: Slot) -> Option<&'static str> {
     Some(match slot {
         Slot::Red => "Red",
@@ -115,7 +115,11 @@ fn parameter(slot: Slot) -> Option<&'static str> {
         Slot::Cyan => "Cyan",
         Slot::Magenta => "Magenta",
         Slot::Yellow => "Yellow",
-        Slot::Intensity | Slot::Intensity16 | Slot::Uv | Slot::Fixed(_) => return None,
+        // An extra emitter (`emitter:NAME`) is held at 0 on DMX until the colour solve
+        // drives it (docs/scene.md); its Eos parameter name comes with that.
+        Slot::Intensity | Slot::Intensity16 | Slot::Uv | Slot::Fixed(_) | Slot::Emitter(_) => {
+            return None;
+        }
     })
 }
 
