@@ -10,6 +10,8 @@ use visobjd_method::sampler::Constraints;
 use visobjd_scene::Scene;
 use visobjd_scene::look::{Look, LookFile};
 
+use super::rules::Rules;
+
 /// Base looks kept for undo (docs/osc.md; at least 32 were asked for).
 pub const HISTORY: usize = 64;
 
@@ -81,6 +83,8 @@ pub struct Session {
     pub locked_groups: Vec<bool>,
     /// Per light: locked.
     pub locked_lights: Vec<bool>,
+    /// Ratios, saturation ranges, exclusions and pins.
+    pub rules: Rules,
     /// Candidates per generate.
     pub count: u32,
     /// Entries at most.
@@ -121,6 +125,7 @@ impl Session {
             key_groups: vec![false; scene.groups.len()],
             locked_groups: vec![false; scene.groups.len()],
             locked_lights: vec![false; lights],
+            rules: Rules::new(scene),
             count,
             clusters,
             seed: 0,
@@ -139,7 +144,8 @@ impl Session {
         }
     }
 
-    /// The sampler's constraints: locked lights include the lights of locked groups.
+    /// The sampler's constraints: locked lights include the lights of locked groups, then
+    /// the [`Rules`] are added.
     pub fn constraints(&self, scene: &Scene, per_light: bool) -> Constraints {
         let mut locked = self.locked_lights.clone();
         for (g, group) in scene.groups.iter().enumerate() {
@@ -149,11 +155,14 @@ impl Session {
                 }
             }
         }
-        Constraints {
+        let mut c = Constraints {
             locked,
             keys: self.key_groups.clone(),
             per_light,
-        }
+            ..Constraints::none(&visobjd_method::sampler::Rig::new(scene))
+        };
+        self.rules.apply(scene, &mut c);
+        c
     }
 
     /// Makes `look` both base and live, remembering the old base for undo. A look that is
