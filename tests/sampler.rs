@@ -702,8 +702,8 @@ fn excluded_and_pinned_lights_keep_the_base_bit_for_bit_on_a_real_stage() {
             );
         }
         assert_eq!(look.levels[7].intensity, 0.0);
-        for l in 0..8 {
-            changed[l] |= look.levels[l] != base.levels[l];
+        for ((c, got), want) in changed.iter_mut().zip(&look.levels).zip(&base.levels) {
+            *c |= got != want;
         }
     }
     assert_eq!(
@@ -729,8 +729,8 @@ fn a_transfer_touches_exactly_the_named_lights() {
         let from = plan.sample(&onto, &mut rng);
         let mask: Vec<bool> = (0..n).map(|l| (l * 7 + i * 13) % 10 < 3).collect();
         let out = transfer(&onto, &from, &mask);
-        for l in 0..n {
-            let want = if mask[l] {
+        for (l, &taken) in mask.iter().enumerate() {
+            let want = if taken {
                 from.levels[l]
             } else {
                 onto.levels[l]
