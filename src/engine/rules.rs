@@ -128,15 +128,14 @@ impl Rules {
                 format!("group `{}` cannot follow itself", name(follower))
             } else {
                 format!(
-                    "group `{}` cannot follow `{}`: {} already follows {}, which would make a loop of ratios (remove one with ratio 0)",
+                    "group `{}` cannot follow `{}`: `{}` already, which would make a loop of ratios (remove one with ratio 0)",
                     name(follower),
                     name(leader),
-                    name(leader),
-                    cycle[1..]
+                    cycle
                         .iter()
-                        .map(|&g| format!("`{}`", name(g)))
+                        .map(|&g| name(g))
                         .collect::<Vec<_>>()
-                        .join(" and then ")
+                        .join("` follows `")
                 )
             });
         }
