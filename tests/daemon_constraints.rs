@@ -419,3 +419,98 @@ fn constraint_queries_ignore_button_releases() {
     let pins = d.call("/vo/pins", vec![], "/vo/pins/end");
     assert_eq!((pins.len(), num(&pins[0].args[0])), (1, 0.0), "{pins:?}");
 }
+
+/// A session file edited by hand (or from another scene) with constraints this scene cannot
+/// take: each is logged and dropped, the file is kept aside, the rest is restored.
+#[test]
+fn a_session_file_with_impossible_constraints_restores_the_rest() {
+    let mut d = Daemon::start("cons-restore");
+    d.ok(
+        "/vo/group/back/ratio",
+        vec![string("front"), float(0.5)],
+        "/vo/group/ratio",
+    );
+    d.kill();
+    let path = d.state_dir().join("session.json");
+    let mut file: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&path).expect("session.json")).expect("JSON");
+    file["rules"]["ratios"] = serde_json::json!([
+        { "group": "back", "of": "front", "ratio": 0.5 },
+        // A loop with the first, a group the scene lacks, a ratio out of range.
+        { "group": "front", "of": "back", "ratio": 2.0 },
+        { "group": "wings", "of": "front", "ratio": 1.0 },
+        { "group": "side", "of": "front", "ratio": -3.0 },
+    ]);
+    file["rules"]["saturation"] = serde_json::json!([
+        { "group": "side", "min": 0.7, "max": 0.2 },
+        { "channel": 4, "min": 0.1, "max": 0.3 },
+    ]);
+    file["rules"]["exclude"] = serde_json::json!([{ "channel": 99, "mode": "off" }]);
+    file["rules"]["pins"] = serde_json::json!([
+        { "id": 3, "region": [0.6, 0.0, 0.2, 1.0], "channels": [1] },
+        { "id": 5, "region": [0.0, 0.0, 0.3, 1.0], "channels": [1, 2] },
+    ]);
+    std::fs::write(&path, file.to_string()).expect("write session.json");
+    d.restart();
+    let listed = constraints(&mut d);
+    let addrs: Vec<(String, Vec<OscType>)> = listed
+        .iter()
+        .map(|m| (m.addr.clone(), m.args.clone()))
+        .collect();
+    assert_eq!(
+        addrs,
+        vec![
+            (
+                "/vo/constraint".into(),
+                vec![
+                    string("/vo/group/back/ratio"),
+                    string("front"),
+                    OscType::Float(0.5)
+                ]
+            ),
+            (
+                "/vo/constraint".into(),
+                vec![
+                    string("/vo/light/4/saturation"),
+                    OscType::Float(0.1),
+                    OscType::Float(0.3)
+                ]
+            ),
+            (
+                "/vo/pin".into(),
+                [int(5)]
+                    .into_iter()
+                    .chain([0.0, 0.0, 0.3, 1.0].map(float))
+                    .chain([int(1), int(2)])
+                    .collect()
+            ),
+        ]
+    );
+    let log = d.log();
+    for lost in [
+        "loop",
+        "wings",
+        "-3",
+        "saturation range of group `side`",
+        "light 99",
+        "pin 3",
+    ] {
+        assert!(log.contains(lost), "the log names {lost}:\n{log}");
+    }
+    let aside = std::fs::read_dir(d.state_dir())
+        .expect("the state folder")
+        .filter_map(Result::ok)
+        .any(|e| {
+            e.file_name()
+                .to_string_lossy()
+                .starts_with("session.json.partial-")
+        });
+    assert!(aside, "the file was kept aside");
+    // A new pin numbers after the restored one.
+    let r = d.ok(
+        "/vo/pin/add",
+        [0.5, 0.0, 1.0, 1.0].map(float).to_vec(),
+        "/vo/pin/added",
+    );
+    assert_eq!(r.args[0], int(6));
+}
