@@ -444,6 +444,7 @@ fn a_session_file_with_impossible_constraints_restores_the_rest() {
     file["rules"]["saturation"] = serde_json::json!([
         { "group": "side", "min": 0.7, "max": 0.2 },
         { "channel": 4, "min": 0.1, "max": 0.3 },
+        { "group": "front", "min": 0.1, "max": 0.3 },
     ]);
     file["rules"]["exclude"] = serde_json::json!([{ "channel": 99, "mode": "off" }]);
     file["rules"]["pins"] = serde_json::json!([

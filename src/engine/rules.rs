@@ -281,13 +281,22 @@ impl Rules {
                 max: s.max,
             };
             let valid = check_saturation(range);
-            let (slot, what) = match (&s.group, s.channel) {
+            let coloured = |lights: &[usize]| lights.iter().any(|&l| scene.profile(l).has_colour());
+            let (slot, what, coloured) = match (&s.group, s.channel) {
                 (Some(name), _) => match group(name, "saturation range", &mut lost) {
-                    Some(g) => (&mut self.group_saturation[g], format!("group `{name}`")),
+                    Some(g) => (
+                        &mut self.group_saturation[g],
+                        format!("group `{name}`"),
+                        coloured(&scene.groups[g].lights),
+                    ),
                     None => continue,
                 },
                 (None, Some(ch)) => match light(ch, "saturation range", &mut lost) {
-                    Some(l) => (&mut self.light_saturation[l], format!("light {ch}")),
+                    Some(l) => (
+                        &mut self.light_saturation[l],
+                        format!("light {ch}"),
+                        coloured(&[l]),
+                    ),
                     None => continue,
                 },
                 (None, None) => {
@@ -296,7 +305,10 @@ impl Rules {
                 }
             };
             match valid {
-                Ok(()) => *slot = range,
+                Ok(()) if coloured => *slot = range,
+                Ok(()) => lost.push(format!(
+                    "the saturation range of {what}: it has no light with colour"
+                )),
                 Err(e) => lost.push(format!("the saturation range of {what}: {e}")),
             }
         }

@@ -85,9 +85,12 @@ pub fn ratio_cycle(ratios: &[Ratio], follower: usize, leader: usize) -> Option<V
 /// One group as ratios see it.
 #[derive(Debug, Clone)]
 struct Member {
-    lights: Vec<usize>,
+    /// How many lights it has.
+    lights: usize,
     /// Its lights the sampler may change (not locked, excluded, pinned or off).
     free: Vec<usize>,
+    /// Its lights whose values are fixed.
+    fixed: Vec<usize>,
     /// Its intensity relative to the tree's root.
     scale: f32,
 }
@@ -107,10 +110,14 @@ pub(crate) fn ratio_trees(
     ratios: &[Ratio],
 ) -> Vec<RatioTree> {
     let follows = |g: usize| ratios.iter().find(|r| r.follower == g);
-    let member = |g: usize, scale: f32| Member {
-        lights: groups[g].clone(),
-        free: groups[g].iter().copied().filter(|&l| !held[l]).collect(),
-        scale,
+    let member = |g: usize, scale: f32| {
+        let (fixed, free) = groups[g].iter().partition(|&&l| held[l]);
+        Member {
+            lights: groups[g].len(),
+            free,
+            fixed,
+            scale,
+        }
     };
     let mut roots: Vec<usize> = ratios
         .iter()
@@ -147,46 +154,38 @@ impl RatioTree {
     /// free lights take one value that gives it its share. When fixed lights make the
     /// ratios impossible, they win and the rest come as close as 0..1 allows.
     pub(crate) fn hold(&self, look: &mut Look) {
-        let mean = |m: &Member, look: &Look| {
-            m.lights
+        let sum = |lights: &[usize], look: &Look| {
+            lights
                 .iter()
                 .map(|&l| look.levels[l].intensity)
                 .sum::<f32>()
-                / m.lights.len() as f32
         };
-        let fixed_sum = |m: &Member, look: &Look| {
-            m.lights
+        let members = || {
+            self.members
                 .iter()
-                .filter(|l| !m.free.contains(l))
-                .map(|&l| look.levels[l].intensity)
-                .sum::<f32>()
+                .filter(|m| m.lights > 0 && m.scale > 0.0)
         };
         let (mut lo, mut hi) = (0.0f32, f32::INFINITY);
-        for m in self
-            .members
-            .iter()
-            .filter(|m| !m.lights.is_empty() && m.scale > 0.0)
-        {
-            let n = m.lights.len() as f32;
-            let fixed = fixed_sum(m, look);
+        for m in members() {
+            let (n, fixed) = (m.lights as f32, sum(&m.fixed, look));
             lo = lo.max(fixed / n / m.scale);
             hi = hi.min((fixed + m.free.len() as f32) / n / m.scale);
         }
-        let Some(root) = self.members.first().filter(|m| !m.lights.is_empty()) else {
+        let Some(root) = self.members.first().filter(|m| m.lights > 0) else {
             return;
         };
-        let sampled = mean(root, look);
+        let sampled = (sum(&root.fixed, look) + sum(&root.free, look)) / root.lights as f32;
         let x = if lo <= hi {
             sampled.clamp(lo, hi)
         } else {
             sampled.clamp(hi, lo)
         };
-        for (i, m) in self.members.iter().enumerate() {
-            if m.free.is_empty() || m.lights.is_empty() || (i == 0 && x == sampled) {
+        for (i, m) in members().enumerate() {
+            if m.free.is_empty() || (i == 0 && x == sampled) {
                 continue;
             }
-            let n = m.lights.len() as f32;
-            let v = ((n * m.scale * x - fixed_sum(m, look)) / m.free.len() as f32).clamp(0.0, 1.0);
+            let share = m.lights as f32 * m.scale * x - sum(&m.fixed, look);
+            let v = (share / m.free.len() as f32).clamp(0.0, 1.0);
             for &l in &m.free {
                 look.levels[l].intensity = v;
             }
