@@ -376,3 +376,371 @@ fn region_targeting_selects_exactly_the_expected_lights() {
         .sensitivity(Region::new(0.0, 0.0, 0.25, 1.0).unwrap());
     assert!(s[1] == 0.0 && s[0] > 0.0 && s[2] > 0.0);
 }
+
+// ---- the prototype's constraints (docs/method.md, "Designer constraints") ----------------
+
+use visobjd_method::constrain::{Ratio, Saturation, clamp_saturation, saturation, transfer};
+
+/// A rig of `groups` groups of `size` lights each, all colour-capable.
+fn grouped(groups: usize, size: usize) -> Rig {
+    Rig {
+        groups: (0..groups)
+            .map(|g| (g * size..(g + 1) * size).collect())
+            .collect(),
+        colored: vec![true; groups * size],
+    }
+}
+
+fn group_mean(look: &Look, lights: &[usize]) -> f32 {
+    lights
+        .iter()
+        .map(|&l| look.levels[l].intensity)
+        .sum::<f32>()
+        / lights.len() as f32
+}
+
+/// A base look with every light at a different level and colour.
+fn varied_base(n: usize) -> Look {
+    Look {
+        levels: (0..n)
+            .map(|i| Level {
+                intensity: 0.05 + 0.9 * ((i * 37 % n) as f32 / n as f32),
+                color: [0.9, 0.2 + 0.5 * (i % 3) as f32 / 2.0, 0.1],
+            })
+            .collect(),
+    }
+}
+
+/// Ratios are held to this, as a fraction of full, in every candidate.
+const RATIO_TOLERANCE: f32 = 1e-4;
+
+#[test]
+fn ratios_hold_in_every_candidate_through_chains_keys_locks_and_the_range() {
+    // Groups 0..6 of three lights. 1 follows 0 at 0.5, 2 follows 1 at 1.5 (a chain), 3
+    // follows 0 at 1.8 (out of range unless 0 is held below 1/1.8), 5 follows 4 at 0.5
+    // with 4 locked at its base (the locked leader is fixed, the follower follows).
+    let r = grouped(6, 3);
+    let n = 18;
+    let base = varied_base(n);
+    let ratio = |follower, leader, ratio| Ratio {
+        follower,
+        leader,
+        ratio,
+    };
+    for designated in [false, true] {
+        let mut c = Constraints::none(&r);
+        c.ratios = vec![
+            ratio(1, 0, 0.5),
+            ratio(2, 1, 1.5),
+            ratio(3, 0, 1.8),
+            ratio(5, 4, 0.5),
+        ];
+        for l in &r.groups[4] {
+            c.locked[*l] = true;
+        }
+        // One light of the follower locked too: the other two make up its share.
+        c.locked[r.groups[2][0]] = true;
+        if designated {
+            // Both ends of a ratio designated keys: the follower still follows.
+            c.keys[0] = true;
+            c.keys[1] = true;
+        }
+        let t = target(n, 0.45, 0.9, 0.5);
+        let plan = Plan::new(&r, &c, &[t], &base, Spread::default());
+        let mut rng = Rng::seed_from_u64(11);
+        let mut leaders = Vec::new();
+        for _ in 0..500 {
+            let look = plan.sample(&base, &mut rng);
+            let m: Vec<f32> = r.groups.iter().map(|g| group_mean(&look, g)).collect();
+            for (b, a, k) in [(1, 0, 0.5), (2, 1, 1.5), (3, 0, 1.8), (5, 4, 0.5)] {
+                assert!(
+                    (m[b] - k * m[a]).abs() <= RATIO_TOLERANCE,
+                    "group {b} at {} is not {k} x group {a} at {} (keys {designated})",
+                    m[b],
+                    m[a]
+                );
+            }
+            for &l in r.groups[4].iter().chain([&r.groups[2][0]]) {
+                assert_eq!(
+                    look.levels[l].intensity.to_bits(),
+                    base.levels[l].intensity.to_bits()
+                );
+            }
+            assert!(
+                look.levels
+                    .iter()
+                    .all(|l| (0.0..=1.0).contains(&l.intensity))
+            );
+            leaders.push(m[0]);
+        }
+        // The leader still varies: ratios do not freeze the look (as a designated key it is
+        // drawn near 0.9, above what group 3 allows, and held at 1/1.8 every time).
+        if designated {
+            assert!(
+                leaders
+                    .iter()
+                    .all(|&m| (m - 1.0 / 1.8).abs() < RATIO_TOLERANCE)
+            );
+        } else {
+            assert!(
+                variance(&leaders) > 1e-3,
+                "leader variance {}",
+                variance(&leaders)
+            );
+        }
+    }
+}
+
+#[test]
+fn a_locked_follower_makes_its_leader_follow() {
+    let r = grouped(2, 2);
+    let base = varied_base(4);
+    let mut c = Constraints::none(&r);
+    c.ratios = vec![Ratio {
+        follower: 1,
+        leader: 0,
+        ratio: 2.0,
+    }];
+    c.locked[2] = true;
+    c.locked[3] = true;
+    let want = group_mean(&base, &r.groups[1]) / 2.0;
+    let plan = Plan::new(
+        &r,
+        &c,
+        &[target(4, 0.5, 0.9, 0.5)],
+        &base,
+        Spread::default(),
+    );
+    let mut rng = Rng::seed_from_u64(12);
+    for _ in 0..200 {
+        let look = plan.sample(&base, &mut rng);
+        assert!((group_mean(&look, &r.groups[0]) - want).abs() <= RATIO_TOLERANCE);
+    }
+}
+
+/// HSV hue in degrees (None for a grey).
+fn hue(c: [f32; 3]) -> Option<f32> {
+    let max = c[0].max(c[1]).max(c[2]);
+    let min = c[0].min(c[1]).min(c[2]);
+    let d = max - min;
+    if d <= 1e-6 {
+        return None;
+    }
+    let h = if max == c[0] {
+        ((c[1] - c[2]) / d).rem_euclid(6.0)
+    } else if max == c[1] {
+        (c[2] - c[0]) / d + 2.0
+    } else {
+        (c[0] - c[1]) / d + 4.0
+    };
+    Some(h * 60.0)
+}
+
+#[test]
+fn saturation_stays_in_its_range_with_the_sampler_s_hue_and_value() {
+    let n = 30;
+    let mut r = rig(n);
+    r.colored[0] = false;
+    let base = varied_base(n);
+    let mut t = target(n, 0.5, 0.9, 0.4);
+    t.aspects = Aspects::Both;
+    t.palette = [
+        ([1.0, 0.0, 0.0], 0.3),
+        ([0.2, 0.4, 1.0], 0.3),
+        ([1.0, 0.9, 0.8], 0.2),
+        ([0.5, 1.0, 0.6], 0.2),
+    ]
+    .map(|(color, weight)| PaletteColor { color, weight })
+    .to_vec();
+    let range = Saturation { min: 0.3, max: 0.6 };
+    let mut c = Constraints::none(&r);
+    for l in 1..20 {
+        c.saturation[l] = range;
+    }
+    let free = Plan::new(
+        &r,
+        &Constraints::none(&r),
+        &[t.clone()],
+        &base,
+        Spread::default(),
+    );
+    let held = Plan::new(&r, &c, &[t], &base, Spread::default());
+    let (mut a, mut b) = (Rng::seed_from_u64(13), Rng::seed_from_u64(13));
+    let mut clamped = 0;
+    for _ in 0..500 {
+        let (x, y) = (free.sample(&base, &mut a), held.sample(&base, &mut b));
+        for l in 0..n {
+            let (cx, cy) = (x.levels[l].color, y.levels[l].color);
+            assert_eq!(
+                x.levels[l].intensity.to_bits(),
+                y.levels[l].intensity.to_bits()
+            );
+            if !(1..20).contains(&l) {
+                assert_eq!(cx, cy, "light {l} has no range");
+                continue;
+            }
+            let s = saturation(cy);
+            assert!(
+                (range.min - 1e-5..=range.max + 1e-5).contains(&s),
+                "light {l}: saturation {s} of {cy:?}"
+            );
+            let vmax = |c: [f32; 3]| c[0].max(c[1]).max(c[2]);
+            assert!(
+                (vmax(cx) - vmax(cy)).abs() < 1e-6,
+                "value kept: {cx:?} {cy:?}"
+            );
+            if let (Some(hx), Some(hy)) = (hue(cx), hue(cy)) {
+                assert!((hx - hy).abs() < 0.05, "hue kept: {cx:?} -> {cy:?}");
+            }
+            clamped += usize::from(cx != cy);
+        }
+    }
+    assert!(
+        clamped > 1000,
+        "the range mattered: {clamped} colours clamped"
+    );
+    assert_eq!(
+        clamp_saturation([0.3, 0.2, 0.1], Saturation::ANY),
+        [0.3, 0.2, 0.1]
+    );
+}
+
+#[test]
+fn off_lights_are_exactly_zero_and_count_as_zero_in_the_mean() {
+    let n = 20;
+    let r = rig(n);
+    let base = varied_base(n);
+    let mut c = Constraints::none(&r);
+    for l in 0..5 {
+        c.off[l] = true;
+    }
+    // A locked light that is also off keeps its base: what is fixed stays fixed.
+    c.locked[4] = true;
+    let mut t = target(n, 0.4, 0.8, 0.3);
+    t.aspects = Aspects::Both;
+    t.palette = vec![PaletteColor {
+        color: [0.0, 0.0, 1.0],
+        weight: 1.0,
+    }];
+    let plan = Plan::new(&r, &c, &[t], &base, Spread::default());
+    let mut rng = Rng::seed_from_u64(14);
+    let mut means = Vec::new();
+    for _ in 0..1000 {
+        let look = plan.sample(&base, &mut rng);
+        for l in 0..4 {
+            assert_eq!(look.levels[l].intensity.to_bits(), 0.0f32.to_bits());
+            assert_eq!(look.levels[l].color, base.levels[l].color, "colour kept");
+        }
+        assert_eq!(look.levels[4], base.levels[4]);
+        means.push(mean(
+            &look.levels.iter().map(|l| l.intensity).collect::<Vec<_>>(),
+        ));
+    }
+    // The other lights make up the mean around the held ones (4 at 0, one at its base).
+    assert!((mean(&means) - 0.4).abs() < 0.01, "{}", mean(&means));
+}
+
+#[test]
+fn excluded_and_pinned_lights_keep_the_base_bit_for_bit_on_a_real_stage() {
+    use common::{TestLight, temp_dir, write_scene};
+    use visobjd::engine::rules::{Exclude, Pin, Rules};
+    let dir = temp_dir("sampler-pins");
+    // Eight lights in two groups, each lighting its own 5-pixel column of a 40x20 stage.
+    let lights: Vec<TestLight> = (0..8)
+        .map(|i| {
+            TestLight::rect(
+                i + 1,
+                Some(if i < 4 { "left" } else { "right" }),
+                "rgb",
+                1 + 3 * i as u16,
+                (5 * i as usize, 0, 5 * i as usize + 5, 20),
+                0.8,
+            )
+        })
+        .collect();
+    write_scene(&dir, 40, 20, &["left", "right"], &lights);
+    let stage = visobjd_method::stage::Stage::load(&dir, 40).unwrap();
+    let scene = &stage.scene;
+    let mut rules = Rules::new(scene);
+    // The pin covers columns 0..10 of 40: lights 1 and 2.
+    let region = Region::new(0.0, 0.0, 0.25, 1.0).unwrap();
+    let pinned: Vec<usize> = (0..8)
+        .filter(|&l| stage.footprints.select(region)[l])
+        .collect();
+    assert_eq!(pinned, vec![0, 1]);
+    rules.pins.push(Pin {
+        id: 1,
+        region,
+        lights: pinned,
+    });
+    let right = scene.group_index("right").unwrap();
+    rules.group_exclude[right] = Exclude::Ignore;
+    // A light's own exclusion wins over its group's.
+    rules.light_exclude[7] = Exclude::Off;
+    let mut c = Constraints::none(&stage.rig);
+    rules.apply(scene, &mut c);
+    let base = varied_base(8);
+    let mut t = target(8, 0.5, 0.9, 0.5);
+    t.aspects = Aspects::Both;
+    t.palette = vec![PaletteColor {
+        color: [0.0, 1.0, 0.0],
+        weight: 1.0,
+    }];
+    let plan = Plan::new(&stage.rig, &c, &[t], &base, Spread::default());
+    let mut rng = Rng::seed_from_u64(15);
+    let mut changed = [false; 8];
+    for _ in 0..300 {
+        let look = plan.sample(&base, &mut rng);
+        for l in [0, 1, 4, 5, 6] {
+            assert_eq!(
+                look.levels[l].intensity.to_bits(),
+                base.levels[l].intensity.to_bits()
+            );
+            assert_eq!(
+                look.levels[l].color.map(f32::to_bits),
+                base.levels[l].color.map(f32::to_bits)
+            );
+        }
+        assert_eq!(look.levels[7].intensity, 0.0);
+        for ((c, got), want) in changed.iter_mut().zip(&look.levels).zip(&base.levels) {
+            *c |= got != want;
+        }
+    }
+    assert_eq!(
+        changed,
+        [false, false, true, true, false, false, false, true]
+    );
+}
+
+#[test]
+fn a_transfer_touches_exactly_the_named_lights() {
+    let n = 50;
+    let onto = varied_base(n);
+    let mut rng = Rng::seed_from_u64(16);
+    let r = rig(n);
+    let plan = Plan::new(
+        &r,
+        &Constraints::none(&r),
+        &[target(n, 0.5, 0.9, 0.5)],
+        &onto,
+        Spread::default(),
+    );
+    for i in 0..100 {
+        let from = plan.sample(&onto, &mut rng);
+        let mask: Vec<bool> = (0..n).map(|l| (l * 7 + i * 13) % 10 < 3).collect();
+        let out = transfer(&onto, &from, &mask);
+        for (l, &taken) in mask.iter().enumerate() {
+            let want = if taken {
+                from.levels[l]
+            } else {
+                onto.levels[l]
+            };
+            assert_eq!(
+                out.levels[l].intensity.to_bits(),
+                want.intensity.to_bits(),
+                "light {l}"
+            );
+            assert_eq!(out.levels[l].color, want.color, "light {l}");
+        }
+    }
+}

@@ -15,6 +15,7 @@ mod looks;
 mod objective;
 mod status;
 mod test_hook;
+mod transfer;
 
 use std::sync::Arc;
 
@@ -39,6 +40,7 @@ enum Command {
     Looks(looks::Cmd),
     Status(status::Cmd),
     TestHook(test_hook::Cmd),
+    Transfer(transfer::Cmd),
 }
 
 impl Command {
@@ -73,6 +75,9 @@ impl Command {
         if let Some(c) = test_hook::Cmd::parse(req)? {
             return Ok(Command::TestHook(c));
         }
+        if let Some(c) = transfer::Cmd::parse(req)? {
+            return Ok(Command::Transfer(c));
+        }
         Err(format!(
             "unknown address {}: the addresses are listed in the README's OSC reference",
             req.path()
@@ -92,6 +97,7 @@ impl Command {
             Command::Looks(_) => "looks",
             Command::Status(_) => "status",
             Command::TestHook(_) => "test",
+            Command::Transfer(_) => "transfer",
         }
     }
 
@@ -107,6 +113,7 @@ impl Command {
             Command::Looks(c) => c.apply(e),
             Command::Status(c) => c.apply(e, peer),
             Command::TestHook(c) => c.apply(e),
+            Command::Transfer(c) => c.apply(e),
         }
     }
 }

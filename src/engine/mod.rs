@@ -8,6 +8,7 @@
 
 mod outcome;
 pub mod persist;
+pub mod rules;
 pub mod session;
 
 pub use outcome::Outcome;

@@ -14,6 +14,7 @@ use std::time::Duration;
 
 use serde::{Deserialize, Serialize};
 
+use super::rules::RulesFile;
 use super::session::{Entry, Session};
 use visobjd_files::{Loaded, load_json, save_json};
 use visobjd_method::objective::ObjectiveRecord;
@@ -61,6 +62,9 @@ pub struct SessionFile {
     clusters: u32,
     seed: u64,
     fade_s: f32,
+    /// Ratios, saturation ranges, exclusions and pins.
+    #[serde(default)]
+    rules: RulesFile,
 }
 
 /// Paths of the state files.
@@ -197,6 +201,7 @@ fn apply_session(scene: &Scene, f: &SessionFile, s: &mut Session) -> Vec<String>
             )),
         }
     }
+    lost.extend(s.rules.restore(scene, &f.rules));
     s.count = f.count.clamp(1, 1000);
     s.clusters = f.clusters.clamp(1, 64);
     s.seed = f.seed;
@@ -253,6 +258,7 @@ impl Snapshot {
                 clusters: s.clusters,
                 seed: s.seed,
                 fade_s: s.fade_s,
+                rules: s.rules.record(scene),
             },
         }
     }

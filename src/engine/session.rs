@@ -10,6 +10,8 @@ use visobjd_method::sampler::Constraints;
 use visobjd_scene::Scene;
 use visobjd_scene::look::{Look, LookFile};
 
+use super::rules::Rules;
+
 /// Base looks kept for undo (docs/osc.md; at least 32 were asked for).
 pub const HISTORY: usize = 64;
 
@@ -83,6 +85,8 @@ pub struct Session {
     pub locked_lights: Vec<bool>,
     /// The lights an Eos console last reported selected (`/eos/out/active/chan`).
     pub console_selection: Vec<usize>,
+    /// Ratios, saturation ranges, exclusions and pins.
+    pub rules: Rules,
     /// Candidates per generate.
     pub count: u32,
     /// Entries at most.
@@ -124,6 +128,7 @@ impl Session {
             locked_groups: vec![false; scene.groups.len()],
             locked_lights: vec![false; lights],
             console_selection: Vec::new(),
+            rules: Rules::new(scene),
             count,
             clusters,
             seed: 0,
@@ -142,7 +147,8 @@ impl Session {
         }
     }
 
-    /// The sampler's constraints: locked lights include the lights of locked groups.
+    /// The sampler's constraints: locked lights include the lights of locked groups, then
+    /// the [`Rules`] are added.
     pub fn constraints(&self, scene: &Scene, per_light: bool) -> Constraints {
         let mut locked = self.locked_lights.clone();
         for (g, group) in scene.groups.iter().enumerate() {
@@ -152,11 +158,14 @@ impl Session {
                 }
             }
         }
-        Constraints {
+        let mut c = Constraints {
             locked,
             keys: self.key_groups.clone(),
             per_light,
-        }
+            ..Constraints::none(&visobjd_method::sampler::Rig::new(scene))
+        };
+        self.rules.apply(scene, &mut c);
+        c
     }
 
     /// Makes `look` both base and live, remembering the old base for undo. A look that is

@@ -27,6 +27,9 @@ pub const TRIGGERS: &[&str] = &[
     "/vo/objective/*/palette",
     "/vo/objective/*/remove",
     "/vo/unsubscribe",
+    "/vo/constraints",
+    "/vo/pins",
+    "/vo/pin/*/remove",
 ];
 
 /// A message as the engine dispatches it: the address split into lowercase segments, with

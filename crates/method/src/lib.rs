@@ -5,6 +5,7 @@
 //! Pure and seeded: everything that draws takes `&mut impl Rng` and plain data, and
 //! nothing here does network I/O, so a generate is reproducible from its seed.
 
+pub mod constrain;
 pub mod gallery;
 pub mod objective;
 pub mod sampler;

@@ -10,6 +10,7 @@ use rand::Rng;
 use rand::seq::SliceRandom;
 use rand_distr::{Distribution, Normal};
 
+use crate::constrain::{Ratio, RatioTree, Saturation, clamp_saturation, ratio_trees};
 use crate::objective::{Aspects, PaletteColor, nearest};
 use visobjd_compositor::color::srgb_to_lab;
 use visobjd_scene::look::Look;
@@ -55,6 +56,13 @@ pub struct Constraints {
     pub keys: Vec<bool>,
     /// Sample each light on its own instead of one value per group.
     pub per_light: bool,
+    /// Per light: held at intensity 0 in every candidate (excluded `off`), its colour kept.
+    /// A locked light keeps its base instead.
+    pub off: Vec<bool>,
+    /// Per light: its allowed HSV saturation (colour-capable lights only).
+    pub saturation: Vec<Saturation>,
+    /// Groups held at a ratio of another group's intensity; one per follower, no loops.
+    pub ratios: Vec<Ratio>,
 }
 
 impl Constraints {
@@ -64,6 +72,9 @@ impl Constraints {
             locked: vec![false; rig.colored.len()],
             keys: vec![false; rig.groups.len()],
             per_light: false,
+            off: vec![false; rig.colored.len()],
+            saturation: vec![Saturation::ANY; rig.colored.len()],
+            ratios: Vec::new(),
         }
     }
 }
@@ -147,11 +158,17 @@ pub struct Plan {
     intensity: Vec<IntensityStep>,
     color: Vec<ColorStep>,
     spread: Spread,
+    /// Lights held at 0.
+    off: Vec<usize>,
+    ratios: Vec<RatioTree>,
+    /// Free colour-capable lights with a saturation range.
+    saturation: Vec<(usize, Saturation)>,
 }
 
 impl Plan {
     /// Prepares the objectives: intensity aspects first, then colour; within each, larger
-    /// regions first so that a region inside another wins the lights both select.
+    /// regions first so that a region inside another wins the lights both select. Lights
+    /// held off count as locked at 0; ratios and saturation ranges apply after sampling.
     pub fn new(
         rig: &Rig,
         constraints: &Constraints,
@@ -159,6 +176,16 @@ impl Plan {
         base: &Look,
         spread: Spread,
     ) -> Plan {
+        let off: Vec<usize> = (0..rig.colored.len())
+            .filter(|&l| constraints.off[l] && !constraints.locked[l])
+            .collect();
+        let mut held = constraints.clone();
+        let mut start = base.clone();
+        for &l in &off {
+            held.locked[l] = true;
+            start.levels[l].intensity = 0.0;
+        }
+        let (constraints, base) = (&held, &start);
         let mut order: Vec<&Target> = targets.iter().collect();
         order.sort_by(|a, b| b.area.total_cmp(&a.area));
         let group_of = rig.group_of();
@@ -177,12 +204,23 @@ impl Plan {
             intensity,
             color,
             spread,
+            ratios: ratio_trees(&rig.groups, &constraints.locked, &constraints.ratios),
+            saturation: (0..rig.colored.len())
+                .filter(|&l| rig.colored[l] && !constraints.locked[l])
+                .map(|l| (l, constraints.saturation[l]))
+                .filter(|(_, s)| !s.is_any())
+                .collect(),
+            off,
         }
     }
 
-    /// One candidate: the base look with every reached, unlocked light resampled.
+    /// One candidate: the base look with every reached, unlocked light resampled, lights
+    /// held off at 0, then ratios and saturation ranges applied.
     pub fn sample(&self, base: &Look, rng: &mut impl Rng) -> Look {
         let mut look = base.clone();
+        for &l in &self.off {
+            look.levels[l].intensity = 0.0;
+        }
         for step in &self.intensity {
             let keys = if step.designated_keys {
                 Keys::Designated(step.units.iter().map(|u| u.designated).collect())
@@ -206,8 +244,14 @@ impl Plan {
                 }
             }
         }
+        for tree in &self.ratios {
+            tree.hold(&mut look);
+        }
         for step in &self.color {
             assign_colors(step, &mut look, rng);
+        }
+        for &(l, range) in &self.saturation {
+            look.levels[l].color = clamp_saturation(look.levels[l].color, range);
         }
         look
     }
