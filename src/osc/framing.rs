@@ -81,6 +81,15 @@ impl Decoder {
         }
     }
 
+    /// A decoder for a stream whose framing is known beforehand (a client that chose it),
+    /// so a SLIP peer that does not open with END is still read as SLIP.
+    pub fn with_framing(framing: Framing, max: usize) -> Decoder {
+        Decoder {
+            framing: Some(framing),
+            ..Decoder::new(max)
+        }
+    }
+
     /// The framing the stream turned out to use (None before its first byte).
     pub fn framing(&self) -> Option<Framing> {
         self.framing
