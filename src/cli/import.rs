@@ -13,7 +13,7 @@ use std::time::Duration;
 
 use anyhow::{Context, bail};
 use visobjd_rig::{FixtureType, Kind, Library, Rig};
-use visobjd_scene::profile::ProfileFile;
+use visobjd_scene::profile::{Profile, ProfileFile};
 use visobjd_scene::{GroupFile, LightFile, Scene, SceneFile};
 
 /// Arguments of `import`.
@@ -277,7 +277,9 @@ fn merge(rig: &Rig, name: &str, old: Option<&SceneFile>, prune: bool) -> Merged 
         else {
             continue;
         };
-        if !profiles.iter().any(|p| p.name == profile.name) {
+        // A built-in profile (an Eos dimmer) is known to every scene without a table.
+        let built_in = Profile::built_in(&profile.name).is_some_and(|b| &b == profile);
+        if !built_in && !profiles.iter().any(|p| p.name == profile.name) {
             profiles.push(profile.to_file());
         }
         let before = old.light.iter().find(|l| l.channel == f.channel);

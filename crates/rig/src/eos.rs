@@ -579,7 +579,18 @@ fn resolve(library: &Library, c: &EosChannel, ty: &str) -> FixtureType {
         }
     }
     match library.find_eos(&c.manufacturer, &c.model) {
-        Some(Ok(t)) => t,
+        // A patch of another width than the type's is another mode: not this one.
+        Some(Ok(t)) => match (t.footprint, c.footprint) {
+            (Some(lib), Some(eos)) if lib != eos => FixtureType {
+                name: ty.to_string(),
+                footprint: c.footprint,
+                profile: Err(format!(
+                    "{} matches its name but takes {lib} addresses where the patch gives {eos}",
+                    t.name
+                )),
+            },
+            _ => t,
+        },
         Some(Err(why)) => FixtureType {
             name: ty.to_string(),
             footprint: c.footprint,
