@@ -126,8 +126,7 @@ fn split_absolute(abs: u64) -> Result<Option<(u16, u16)>, String> {
 }
 
 /// `U/A`, `U/A<E` or `U/A<U/E` (E the last address), or an absolute address (`276`,
-/// `276<280`); empty is not patched. Returns the patch and the footprint when an end is
-/// given.
+/// `276<280`); empty is not patched. Returns the patch and the addresses it takes.
 fn csv_address(text: &str) -> Result<(Option<(u16, u16)>, Option<usize>), String> {
     let text = text.trim();
     if text.is_empty() {
@@ -153,7 +152,9 @@ fn csv_address(text: &str) -> Result<(Option<(u16, u16)>, Option<usize>), String
     };
     let first = absolute(start)?;
     let patch = split_absolute(first)?;
+    // Eos writes a single address without an end.
     let footprint = match (patch, end) {
+        (Some(_), None) => Some(1),
         (Some((u, _)), Some(e)) => {
             // A bare end is an address in the start's universe.
             let last = if e.contains('/') {
@@ -621,10 +622,10 @@ mod tests {
 
     #[test]
     fn addresses_read_as_eos_writes_them() {
-        assert_eq!(csv_address(" 1/276"), Ok((Some((1, 276)), None)));
+        assert_eq!(csv_address(" 1/276"), Ok((Some((1, 276)), Some(1))));
         assert_eq!(csv_address(" 4/249<290"), Ok((Some((4, 249)), Some(42))));
         assert_eq!(csv_address("3/151<3/153"), Ok((Some((3, 151)), Some(3))));
-        assert_eq!(csv_address("513"), Ok((Some((2, 1)), None)));
+        assert_eq!(csv_address("513"), Ok((Some((2, 1)), Some(1))));
         assert_eq!(csv_address(""), Ok((None, None)));
         assert!(csv_address("1/513").is_err());
         assert!(csv_address("1/20<10").is_err());

@@ -169,9 +169,9 @@ impl Rig {
                     .filter(|f| f.fixture_type == i)
                     .map(|f| f.channel)
                     .collect();
-                let size = t
-                    .footprint
-                    .map_or(String::new(), |n| format!(" ({n} channels)"));
+                let size = t.footprint.map_or(String::new(), |n| {
+                    format!(" ({n} channel{})", if n == 1 { "" } else { "s" })
+                });
                 Some(format!(
                     "needs a profile: {}{size}, {}: {why}",
                     t.name,
