@@ -125,9 +125,12 @@ fn split_absolute(abs: u64) -> Result<Option<(u16, u16)>, String> {
     }
 }
 
+/// Universe and start address (`None`: not patched), and the addresses taken if known.
+type Patched = (Option<(u16, u16)>, Option<usize>);
+
 /// `U/A`, `U/A<E` or `U/A<U/E` (E the last address), or an absolute address (`276`,
 /// `276<280`); empty is not patched. Returns the patch and the addresses it takes.
-fn csv_address(text: &str) -> Result<(Option<(u16, u16)>, Option<usize>), String> {
+fn csv_address(text: &str) -> Result<Patched, String> {
     let text = text.trim();
     if text.is_empty() {
         return Ok((None, None));
@@ -570,14 +573,14 @@ fn is_generic_dimmer(c: &EosChannel) -> bool {
 }
 
 fn resolve(library: &Library, c: &EosChannel, ty: &str) -> FixtureType {
-    if is_generic_dimmer(c) {
-        if let Some(p) = Profile::built_in("dimmer") {
-            return FixtureType {
-                name: p.name.clone(),
-                footprint: Some(1),
-                profile: Ok(p),
-            };
-        }
+    if is_generic_dimmer(c)
+        && let Some(p) = Profile::built_in("dimmer")
+    {
+        return FixtureType {
+            name: p.name.clone(),
+            footprint: Some(1),
+            profile: Ok(p),
+        };
     }
     match library.find_eos(&c.manufacturer, &c.model) {
         // A patch of another width than the type's is another mode: not this one.
@@ -651,14 +654,18 @@ mod tests {
         let csv = "START_CHANNELS\nCHANNEL,FIXTURE_TYPE,MANUFACTURER,ADDRESS,LABEL\n\
                    7,Dimmer,Generic, 1/7,A\n7,Scroller,Custom, 1/8<9,\n8,Dimmer,Generic,,B\nEND_CHANNELS\n";
         let p = parse_csv("x.csv", csv.as_bytes()).unwrap_or_default();
-        let got: Vec<(u32, u32, Option<(u16, u16)>)> = p
+        let got: Vec<String> = p
             .channels
             .iter()
-            .map(|c| (c.channel, c.part, c.address))
+            .map(|c| format!("{}.{} {:?} {:?}", c.channel, c.part, c.address, c.footprint))
             .collect();
         assert_eq!(
             got,
-            [(7, 1, Some((1, 7))), (7, 2, Some((1, 8))), (8, 1, None)]
+            [
+                "7.1 Some((1, 7)) Some(1)",
+                "7.2 Some((1, 8)) Some(2)",
+                "8.1 None None"
+            ]
         );
         let bad = csv.replace("8,Dimmer", "8x,Dimmer");
         let e = parse_csv("x.csv", bad.as_bytes()).unwrap_err().to_string();
