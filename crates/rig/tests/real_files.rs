@@ -304,11 +304,14 @@ fn a_library_finds_types_by_their_eos_names() {
             library.add_ofl(&name, &bytes).expect("ofl");
         }
     }
-    let found = |maker: &str, model: &str| match library.find_eos(maker, model) {
-        Some(Ok(t)) => Ok(t.name),
-        Some(Err(e)) => Err(e),
-        None => Err("none".to_string()),
-    };
+    fn find(library: &visobjd_rig::Library, maker: &str, model: &str) -> Result<String, String> {
+        match library.find_eos(maker, model) {
+            Some(Ok(t)) => Ok(t.name),
+            Some(Err(e)) => Err(e),
+            None => Err("none".to_string()),
+        }
+    }
+    let found = |maker: &str, model: &str| find(&library, maker, model);
     // One mode ("Default"): the name alone will do, or with the mode.
     assert_eq!(
         found("BlenderDMX", "LED_PAR_64_RGBW"),
@@ -342,6 +345,6 @@ fn a_library_finds_types_by_their_eos_names() {
     library
         .add_ofl("cameo/root-par-6.json", &bytes)
         .expect("ofl");
-    let e = found("Cameo", "ROOT_PAR_6_8-channel").expect_err("two files match");
+    let e = find(&library, "Cameo", "ROOT_PAR_6_8-channel").expect_err("two files match");
     assert!(e.starts_with("several fixture types match it"), "{e}");
 }
