@@ -637,7 +637,7 @@ fn the_demo_rig_round_trips_through_mvr() {
 /// The Eos patch export the console tests serve and import (tests/fixtures/rig/README.md).
 const EOS_CSV: &str = "eos-patch.csv";
 
-/// The fake Eos console (`tests/peers/fake_eos.py`) serving `EOS_CSV`'s patch on a
+/// The fake Eos console (`tests/peers/fake_eos.py`) serving an export's patch on a
 /// loopback port; killed when dropped.
 struct FakeEos {
     child: std::process::Child,
@@ -647,6 +647,11 @@ struct FakeEos {
 impl FakeEos {
     /// Starts it with `args`; `None` (after [`tools::missing`]) without python-osc.
     fn start(args: &[&str]) -> Option<FakeEos> {
+        FakeEos::serve(&fixtures().join(EOS_CSV), args)
+    }
+
+    /// Starts it serving the patch of the export `csv`.
+    fn serve(csv: &Path, args: &[&str]) -> Option<FakeEos> {
         use std::io::BufRead;
         if !tools::python_osc() {
             tools::missing(
@@ -660,7 +665,7 @@ impl FakeEos {
         let mut child = Command::new("python3")
             .arg(root.join("tests/peers/fake_eos.py"))
             .arg("--csv")
-            .arg(fixtures().join(EOS_CSV))
+            .arg(csv)
             .args(args)
             .stdout(std::process::Stdio::piped())
             .spawn()
@@ -891,4 +896,40 @@ fn eos_csv_errors_name_the_line_and_types_resolve_only_through_fixtures() {
         ]),
         &["--fixtures", "only name fixture types"],
     );
+}
+
+#[test]
+fn a_large_console_patch_comes_through_whole() {
+    // 300 dimmers on two universes, more than visobjd asks for at once.
+    let dir = temp_dir("import-eos-large");
+    let mut csv = String::from("START_CHANNELS\nCHANNEL,FIXTURE_TYPE,MANUFACTURER,ADDRESS,LABEL\n");
+    for c in 1..=300u32 {
+        csv += &format!(
+            "{c},Dimmer,Generic, {}/{},D{c}\n",
+            1 + (c - 1) / 200,
+            1 + (c - 1) % 200
+        );
+    }
+    csv += "END_CHANNELS\n";
+    let path = dir.join("large.csv");
+    std::fs::write(&path, csv).expect("write");
+    let Some(console) = FakeEos::serve(&path, &[]) else {
+        return;
+    };
+    let (a, b) = (dir.join("tcp"), dir.join("csv"));
+    stdout(&run(&["import", &console.url("eos"), "--out", s(&a)]));
+    stdout(&run(&["import", s(&path), "--out", s(&b)]));
+    let scene = scene_toml(&a);
+    assert_eq!(channels(&scene), (1..=300).collect::<Vec<i64>>());
+    let l = light(&scene, 250);
+    assert_eq!(
+        (l["universe"].as_integer(), l["address"].as_integer()),
+        (Some(2), Some(50))
+    );
+    let strip = |dir: &Path| {
+        let mut t = scene_toml(dir);
+        t.remove("name");
+        t
+    };
+    assert_eq!(strip(&a), strip(&b));
 }

@@ -303,6 +303,18 @@ mod tests {
     }
 
     #[test]
+    fn a_known_framing_does_not_wait_for_the_first_byte() {
+        // A SLIP peer that only ends its frames with END (RFC 1055 allows it).
+        let mut d = Decoder::with_framing(Framing::Slip, MAX_FRAME);
+        let mut out = Vec::new();
+        d.feed(&[b'a', b'b', END, 0, 1, END], &mut out);
+        assert_eq!(
+            out,
+            [Frame::Packet(b"ab".to_vec()), Frame::Packet(vec![0, 1])]
+        );
+    }
+
+    #[test]
     fn slip_escapes_and_empty_frames() {
         let stream = [
             END, END, b'a', ESC, ESC_END, ESC, ESC_ESC, END, END, END, b'b', END,

@@ -6,8 +6,8 @@
 //! convention are the rig crate's `eos` module): `/eos/get/patch/count`, then
 //! `/eos/get/patch/index/<i>` for every index (positions in the patch list, one channel
 //! part each, as ETCLabs' EosSyncLib counts them), likewise `/eos/get/group/count` and
-//! `/eos/get/group/index/<i>`. Every request goes out at once; replies are matched by the
-//! index they carry (their first argument), not by arrival order. Everything else the
+//! `/eos/get/group/index/<i>`. Requests go out a window ahead of the answers; replies are
+//! matched by the index they carry (their first argument), not by arrival order. Everything else the
 //! console sends (pings, the active channel, the command line, notes, augment3d) is skipped.
 
 use std::collections::BTreeMap;
@@ -26,6 +26,8 @@ use crate::osc::packet;
 const PORT_LENGTH_PREFIX: u16 = 3032;
 /// Eos's OSC TCP port for OSC 1.1 (SLIP) packets.
 const PORT_SLIP: u16 = 3037;
+/// Index requests out at once (a few kB of replies each way).
+const WINDOW: usize = 32;
 
 /// Where and how to reach a console named by `source`; `None` when `source` is not an
 /// `eos://` or `eos+slip://` address.
@@ -143,6 +145,27 @@ impl Console<'_> {
         }
     }
 
+    /// Sends index requests up to [`WINDOW`] ahead of the `done` answered ones (`sent`: how
+    /// many went out), so neither side's socket buffers fill with a large show's replies
+    /// while the other is still writing.
+    fn request(
+        &mut self,
+        kind: &str,
+        sent: &mut usize,
+        done: usize,
+        n: usize,
+    ) -> anyhow::Result<()> {
+        let upto = n.min(done + WINDOW);
+        if *sent >= upto {
+            return Ok(());
+        }
+        let batch: Vec<String> = (*sent..upto)
+            .map(|i| format!("/eos/get/{kind}/index/{i}"))
+            .collect();
+        *sent = upto;
+        self.send(&batch)
+    }
+
     /// Sends `count` and returns the number the console answers with.
     fn count(&mut self, kind: &str) -> anyhow::Result<usize> {
         self.send(&[format!("/eos/get/{kind}/count")])?;
@@ -214,15 +237,12 @@ pub fn read(
     };
 
     let n = c.count("patch")?;
-    c.send(
-        &(0..n)
-            .map(|i| format!("/eos/get/patch/index/{i}"))
-            .collect::<Vec<_>>(),
-    )?;
+    let mut sent = 0;
     let mut lists = Lists::default();
     let mut parts: BTreeMap<usize, EosChannel> = BTreeMap::new();
     while parts.len() < n {
         let done = parts.len();
+        c.request("patch", &mut sent, done, n)?;
         let m = c.next(&|| format!("the patch ({done} of {n} entries in)"))?;
         let Reply::Patch {
             channel,
@@ -252,11 +272,7 @@ pub fn read(
     }
 
     let g = c.count("group")?;
-    c.send(
-        &(0..g)
-            .map(|i| format!("/eos/get/group/index/{i}"))
-            .collect::<Vec<_>>(),
-    )?;
+    let mut sent = 0;
     // By group index: the group's number, its list, its channel list.
     let mut mains: BTreeMap<usize, (String, Vec<Arg>)> = BTreeMap::new();
     let mut members: BTreeMap<usize, Vec<Arg>> = BTreeMap::new();
@@ -264,6 +280,7 @@ pub fn read(
         let done = (0..g)
             .filter(|i| mains.contains_key(i) && members.contains_key(i))
             .count();
+        c.request("group", &mut sent, done, g)?;
         let m = c.next(&|| format!("the groups ({done} of {g} in)"))?;
         let Reply::Group {
             number,
