@@ -239,9 +239,12 @@ pub fn read(
     let n = c.count("patch")?;
     let mut sent = 0;
     let mut lists = Lists::default();
-    let mut parts: BTreeMap<usize, EosChannel> = BTreeMap::new();
-    while parts.len() < n {
-        let done = parts.len();
+    // By index and part: should a console answer one index with several parts, none is
+    // lost; the patch is in once every index has answered.
+    let mut parts: BTreeMap<(usize, u32), EosChannel> = BTreeMap::new();
+    let mut answered = std::collections::BTreeSet::new();
+    while answered.len() < n {
+        let done = answered.len();
         c.request("patch", &mut sent, done, n)?;
         let m = c.next(&|| format!("the patch ({done} of {n} entries in)"))?;
         let Reply::Patch {
@@ -268,7 +271,8 @@ pub fn read(
         };
         let entry =
             eos::patch_entry(channel, part, &list).map_err(|e| anyhow::anyhow!("{source}: {e}"))?;
-        parts.insert(i, entry);
+        answered.insert(i);
+        parts.insert((i, part), entry);
     }
 
     let g = c.count("group")?;
