@@ -415,16 +415,16 @@ fn wrong_input_is_one_line_naming_the_file_and_the_fixture_and_changes_nothing()
         before
     );
 
-    // Sources another step adds.
-    fails_with(
-        &run(&["import", "eos://127.0.0.1:3032", "--out", s(&scene)]),
-        &["not supported yet"],
-    );
+    // An Eos CSV export without the patch.
     let csv = dir.join("patch.csv");
-    std::fs::write(&csv, "START_TARGETS\n1,Patch\nEND_TARGETS\n").expect("write");
+    std::fs::write(&csv, "START_TARGETS\n1,Cue\nEND_TARGETS\n").expect("write");
     fails_with(
         &run(&["import", s(&csv), "--out", s(&scene)]),
-        &["patch.csv", "Eos CSV is not supported yet"],
+        &["patch.csv", "no START_CHANNELS block"],
+    );
+    assert_eq!(
+        std::fs::read(scene.join("scene.toml")).expect("read"),
+        before
     );
 
     // The published Capture show: its fixture types are stubs with no dimmer, so nothing
@@ -630,4 +630,306 @@ fn the_demo_rig_round_trips_through_mvr() {
             pb.quantise(&pb.levels(&look, 1.0))
         );
     }
+}
+
+// ---- Eos: a CSV patch export, and the console live over OSC TCP ----
+
+/// The Eos patch export the console tests serve and import (tests/fixtures/rig/README.md).
+const EOS_CSV: &str = "eos-patch.csv";
+
+/// The fake Eos console (`tests/peers/fake_eos.py`) serving an export's patch on a
+/// loopback port; killed when dropped.
+struct FakeEos {
+    child: std::process::Child,
+    port: u16,
+}
+
+impl FakeEos {
+    /// Starts it with `args`; `None` (after [`tools::missing`]) without python-osc.
+    fn start(args: &[&str]) -> Option<FakeEos> {
+        FakeEos::serve(&fixtures().join(EOS_CSV), args)
+    }
+
+    /// Starts it serving the patch of the export `csv`.
+    fn serve(csv: &Path, args: &[&str]) -> Option<FakeEos> {
+        use std::io::BufRead;
+        if !tools::python_osc() {
+            tools::missing(
+                "python-osc",
+                "is not importable by python3",
+                "python3 -m pip install python-osc",
+            );
+            return None;
+        }
+        let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+        let mut child = Command::new("python3")
+            .arg(root.join("tests/peers/fake_eos.py"))
+            .arg("--csv")
+            .arg(csv)
+            .args(args)
+            .stdout(std::process::Stdio::piped())
+            .spawn()
+            .expect("start the fake Eos console");
+        // It prints its port once it listens (a blocking read: it does so at once, or
+        // exits and the read ends).
+        let mut line = String::new();
+        let stdout = child.stdout.take().expect("its stdout");
+        std::io::BufReader::new(stdout)
+            .read_line(&mut line)
+            .expect("read the fake console's port");
+        let port = line.trim().parse().unwrap_or_else(|_| {
+            let _ = child.kill();
+            panic!("the fake Eos console did not start: `{line}`")
+        });
+        Some(FakeEos { child, port })
+    }
+
+    fn url(&self, scheme: &str) -> String {
+        format!("{scheme}://127.0.0.1:{}", self.port)
+    }
+}
+
+impl Drop for FakeEos {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+#[test]
+fn an_eos_console_and_its_csv_export_build_the_same_scene() {
+    let Some(console) = FakeEos::start(&[]) else {
+        return;
+    };
+    let Some(slip) = FakeEos::start(&["--slip"]) else {
+        return;
+    };
+    let dir = temp_dir("import-eos-same");
+    let lib = fixtures();
+    let (from_csv, from_tcp, from_slip) = (dir.join("csv"), dir.join("tcp"), dir.join("slip"));
+    let csv_out = stdout(&run(&[
+        "import",
+        s(&lib.join(EOS_CSV)),
+        "--out",
+        s(&from_csv),
+        "--fixtures",
+        s(&lib),
+    ]));
+    let tcp_out = stdout(&run(&[
+        "import",
+        &console.url("eos"),
+        "--out",
+        s(&from_tcp),
+        "--fixtures",
+        s(&lib),
+    ]));
+    let slip_out = stdout(&run(&[
+        "import",
+        &slip.url("eos+slip"),
+        "--out",
+        s(&from_slip),
+        "--fixtures",
+        s(&lib),
+    ]));
+    let csv = scene_toml(&from_csv);
+    assert_eq!(csv["name"].as_str(), Some("eos-patch"));
+    assert_eq!(
+        scene_toml(&from_tcp)["name"].as_str(),
+        Some("eos 127.0.0.1")
+    );
+    // Everything but the name is the same, whichever way the patch came.
+    let strip = |dir: &Path| {
+        let mut t = scene_toml(dir);
+        t.remove("name");
+        t
+    };
+    assert_eq!(strip(&from_tcp), strip(&from_csv));
+    assert_eq!(strip(&from_slip), strip(&from_csv));
+    // And it is the patch the export holds (read by hand from tests/fixtures/rig/eos-patch.csv).
+    assert_eq!(channels(&csv), [1, 2, 11, 12, 21, 22, 31]);
+    let l = light(&csv, 22);
+    assert_eq!(l["name"].as_str(), Some("Cyc 2, right"));
+    assert_eq!(
+        l["profile"].as_str(),
+        Some("ColorSource PAR Deep Blue (Direct)")
+    );
+    assert_eq!(
+        (l["universe"].as_integer(), l["address"].as_integer()),
+        (Some(2), Some(7))
+    );
+    assert_eq!(light(&csv, 12)["profile"].as_str(), Some(PROFILE));
+    assert_eq!(light(&csv, 12)["address"].as_integer(), Some(16));
+    assert_eq!(
+        light(&csv, 31)["profile"].as_str(),
+        Some("ROOT PAR 6 (8-channel)")
+    );
+    assert_eq!(light(&csv, 2)["profile"].as_str(), Some("dimmer"));
+    for out in [&csv_out, &tcp_out, &slip_out] {
+        assert!(
+            out.contains(
+                "needs a profile: JB_Lighting P18_Profile_Mk2_HP_M1 (42 channels), channels 41-42"
+            ),
+            "{out}"
+        );
+        assert!(
+            out.contains("needs a profile: Custom HMI_Zündung_ARRI (1 channel), channel 51"),
+            "{out}"
+        );
+        assert!(
+            out.contains("channel 51 \"\" (Custom Farbwechsler_HMI,_MagVader_300,_Gera): part 2"),
+            "{out}"
+        );
+        assert!(
+            out.contains("channel 60 \"Spare\" (Generic Dimmer): not patched"),
+            "{out}"
+        );
+    }
+}
+
+#[test]
+fn an_eos_consoles_groups_become_the_scenes_groups() {
+    let Some(console) = FakeEos::start(&["--group", "Front=1-2", "--group", "Cyc=21,22,1"]) else {
+        return;
+    };
+    let dir = temp_dir("import-eos-groups");
+    let out = dir.join("scene");
+    stdout(&run(&[
+        "import",
+        &console.url("eos"),
+        "--out",
+        s(&out),
+        "--fixtures",
+        s(&fixtures()),
+    ]));
+    let scene = scene_toml(&out);
+    // Channel 1 is in both: the first group holding it wins.
+    assert_eq!(light(&scene, 1)["group"].as_str(), Some("Front"));
+    assert_eq!(light(&scene, 22)["group"].as_str(), Some("Cyc"));
+    assert!(light(&scene, 11).get("group").is_none());
+}
+
+#[test]
+fn a_console_that_stops_answering_is_an_error_that_writes_nothing() {
+    let Some(console) = FakeEos::start(&["--hang-after", "3"]) else {
+        return;
+    };
+    let dir = temp_dir("import-eos-hang");
+    let out = dir.join("scene");
+    let r = run(&[
+        "import",
+        &console.url("eos"),
+        "--out",
+        s(&out),
+        "--fixtures",
+        s(&fixtures()),
+        "--timeout",
+        "1",
+    ]);
+    fails_with(
+        &r,
+        &[
+            &console.url("eos"),
+            "stopped answering",
+            "the patch (3 of 12 entries in)",
+        ],
+    );
+    assert!(!out.exists(), "nothing is written");
+    // Nobody listening at all.
+    let free = std::net::TcpListener::bind("127.0.0.1:0").expect("a port");
+    let port = free.local_addr().expect("its port").port();
+    drop(free);
+    let url = format!("eos://127.0.0.1:{port}");
+    fails_with(
+        &run(&["import", &url, "--out", s(&out), "--timeout", "1"]),
+        &[&url, "cannot connect"],
+    );
+    assert!(!out.exists(), "nothing is written");
+}
+
+#[test]
+fn eos_csv_errors_name_the_line_and_types_resolve_only_through_fixtures() {
+    let dir = temp_dir("import-eos-csv");
+    let text = std::fs::read_to_string(fixtures().join(EOS_CSV)).expect("the export");
+    // Line 7 is channel 21; its address loses the `<`.
+    let broken = text.replacen(" 2/1<6,", " 2/1x6,", 1);
+    assert_ne!(broken, text);
+    let csv = dir.join("broken.csv");
+    std::fs::write(&csv, broken).expect("write");
+    let out = dir.join("scene");
+    fails_with(
+        &run(&[
+            "import",
+            s(&csv),
+            "--out",
+            s(&out),
+            "--fixtures",
+            s(&fixtures()),
+        ]),
+        &["broken.csv: line 7: channel 21: ADDRESS `2/1x6`"],
+    );
+    assert!(!out.exists(), "nothing is written");
+    // Without --fixtures only Eos's own dimmers are lights; every other type is listed.
+    let printed = stdout(&run(&[
+        "import",
+        s(&fixtures().join(EOS_CSV)),
+        "--out",
+        s(&out),
+    ]));
+    assert_eq!(channels(&scene_toml(&out)), [1, 2]);
+    for t in [
+        "BlenderDMX LED_PAR_64_RGBW (5 channels), channels 11-12",
+        "ETC ColorSource_PAR_Deep_Blue_Direct (6 channels), channels 21-22",
+        "Cameo ROOT_PAR_6_8-channel (8 channels), channel 31",
+    ] {
+        assert!(
+            printed.contains(&format!("needs a profile: {t}")),
+            "{t}: {printed}"
+        );
+    }
+    // A library is for sources that only name their types.
+    fails_with(
+        &run(&[
+            "import",
+            s(&fixtures().join(PAR)),
+            "--fixtures",
+            s(&fixtures()),
+        ]),
+        &["--fixtures", "only name fixture types"],
+    );
+}
+
+#[test]
+fn a_large_console_patch_comes_through_whole() {
+    // 300 dimmers on two universes, more than visobjd asks for at once.
+    let dir = temp_dir("import-eos-large");
+    let mut csv = String::from("START_CHANNELS\nCHANNEL,FIXTURE_TYPE,MANUFACTURER,ADDRESS,LABEL\n");
+    for c in 1..=300u32 {
+        csv += &format!(
+            "{c},Dimmer,Generic, {}/{},D{c}\n",
+            1 + (c - 1) / 200,
+            1 + (c - 1) % 200
+        );
+    }
+    csv += "END_CHANNELS\n";
+    let path = dir.join("large.csv");
+    std::fs::write(&path, csv).expect("write");
+    let Some(console) = FakeEos::serve(&path, &[]) else {
+        return;
+    };
+    let (a, b) = (dir.join("tcp"), dir.join("csv"));
+    stdout(&run(&["import", &console.url("eos"), "--out", s(&a)]));
+    stdout(&run(&["import", s(&path), "--out", s(&b)]));
+    let scene = scene_toml(&a);
+    assert_eq!(channels(&scene), (1..=300).collect::<Vec<i64>>());
+    let l = light(&scene, 250);
+    assert_eq!(
+        (l["universe"].as_integer(), l["address"].as_integer()),
+        (Some(2), Some(50))
+    );
+    let strip = |dir: &Path| {
+        let mut t = scene_toml(dir);
+        t.remove("name");
+        t
+    };
+    assert_eq!(strip(&a), strip(&b));
 }

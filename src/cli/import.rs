@@ -1,31 +1,41 @@
 //! `visobjd import`: a scene from the rig as the lighting world describes it (an MVR plot
-//! with its GDTF fixture types), or a fixture type's modes as profiles (a GDTF file, an
-//! Open Fixture Library JSON file). The source's kind is told by its content; the parsing
-//! is the rig crate's. A re-import into an existing scene keeps what a person or a capture
-//! added (docs/cli.md, "What a re-import keeps").
+//! with its GDTF fixture types; an Eos patch, from a CSV export or live from the console,
+//! with `--fixtures` resolving the types it names), or a fixture type's modes as profiles
+//! (a GDTF file, an Open Fixture Library JSON file). The source's kind is told by its
+//! content; the parsing is the rig crate's. A re-import into an existing scene keeps what
+//! a person or a capture added (docs/import.md, "What a re-import keeps").
+
+mod eos;
 
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
+use std::time::Duration;
 
 use anyhow::{Context, bail};
-use visobjd_rig::{FixtureType, Kind, Rig};
-use visobjd_scene::profile::ProfileFile;
+use visobjd_rig::{FixtureType, Kind, Library, Rig};
+use visobjd_scene::profile::{Profile, ProfileFile};
 use visobjd_scene::{GroupFile, LightFile, Scene, SceneFile};
 
 /// Arguments of `import`.
 #[derive(clap::Args)]
 pub struct Args {
-    /// An MVR plot (`.mvr`), a GDTF fixture type (`.gdtf`) or an Open Fixture Library
-    /// fixture (`.json`); told apart by content.
+    /// An MVR plot (`.mvr`), a GDTF fixture type (`.gdtf`), an Open Fixture Library
+    /// fixture (`.json`), an Eos CSV export (told apart by content), or an Eos console:
+    /// `eos://HOST[:PORT]` (OSC 1.0, port 3032) or `eos+slip://HOST[:PORT]` (3037).
     source: String,
     /// The scene folder to write, or to update when it has a scene.toml (required for an
-    /// MVR; for a fixture type, its profiles are added to that existing scene).
+    /// MVR or an Eos patch; for a fixture type, its profiles are added to that existing
+    /// scene).
     #[arg(long)]
     out: Option<PathBuf>,
-    /// A folder of GDTF or OFL files, for sources that only name fixture types (an Eos
-    /// patch: not supported yet).
+    /// A folder of GDTF or OFL files (searched with its subfolders) resolving the fixture
+    /// types an Eos patch names.
     #[arg(long)]
     fixtures: Option<PathBuf>,
+    /// Seconds an Eos console may stay silent (connecting, or between replies) before the
+    /// import gives up.
+    #[arg(long, default_value_t = 5.0)]
+    timeout: f64,
     /// Drop the scene's lights that the source does not have (default: keep them).
     #[arg(long)]
     prune: bool,
@@ -33,29 +43,56 @@ pub struct Args {
 
 /// Runs `import`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    if args.source.starts_with("eos://") {
-        bail!(
-            "{}: importing from an Eos console is not supported yet",
-            args.source
-        );
+    if !(args.timeout.is_finite() && (0.1..=600.0).contains(&args.timeout)) {
+        bail!("--timeout must be 0.1..=600 seconds, got {}", args.timeout);
     }
-    if let Some(dir) = &args.fixtures {
-        bail!(
-            "--fixtures {}: a fixture library is for sources that only name fixture types (Eos CSV, eos://), which are not supported yet; MVR carries its GDTF files",
-            dir.display()
-        );
+    if let Some(console) = eos::target(&args.source) {
+        let (addr, framing) = console?;
+        let Some(out) = &args.out else {
+            bail!(
+                "{}: an Eos patch becomes a scene: give --out SCENE_DIR",
+                args.source
+            );
+        };
+        let library = library(args.fixtures.as_deref())?;
+        let quiet = Duration::from_secs_f64(args.timeout);
+        let patch = eos::read(&args.source, &addr, framing, quiet)?;
+        let rig = patch.to_rig(&library);
+        rig.check(&args.source)?;
+        let host = addr.rsplit_once(':').map_or(addr.as_str(), |(h, _)| h);
+        return import_rig(&args.source, &format!("eos {host}"), &rig, out, args.prune);
     }
     let path = PathBuf::from(&args.source);
     let bytes =
         std::fs::read(&path).with_context(|| format!("{}: cannot read it", path.display()))?;
     let file = path.display().to_string();
-    match visobjd_rig::kind(&file, &bytes)? {
+    let kind = visobjd_rig::kind(&file, &bytes)?;
+    if let (Some(dir), false) = (&args.fixtures, kind == Kind::EosCsv) {
+        bail!(
+            "--fixtures {}: a fixture library is for sources that only name fixture types (an Eos CSV export, eos://); {file} carries or is its fixture types",
+            dir.display()
+        );
+    }
+    let stem = path
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    match kind {
         Kind::Mvr => {
             let rig = visobjd_rig::mvr::parse(&file, &bytes)?;
             let Some(out) = &args.out else {
                 bail!("{file}: an MVR becomes a scene: give --out SCENE_DIR");
             };
-            import_rig(&file, &rig, out, args.prune)
+            import_rig(&file, &stem, &rig, out, args.prune)
+        }
+        Kind::EosCsv => {
+            let Some(out) = &args.out else {
+                bail!("{file}: an Eos patch becomes a scene: give --out SCENE_DIR");
+            };
+            let patch = visobjd_rig::eos::parse_csv(&file, &bytes)?;
+            let rig = patch.to_rig(&library(args.fixtures.as_deref())?);
+            rig.check(&file)?;
+            import_rig(&file, &stem, &rig, out, args.prune)
         }
         Kind::Gdtf => {
             let ty = visobjd_rig::gdtf::GdtfType::parse(&file, &bytes)?;
@@ -66,6 +103,58 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             import_types(&file, &ty.fixture_types(), args.out.as_deref())
         }
     }
+}
+
+/// The GDTF (`.gdtf`) and OFL (`.json`) files under `dir`, by their path relative to it
+/// (an OFL file's manufacturer is in its path); none without `--fixtures`. A file there
+/// that does not parse is an error naming it.
+fn library(dir: Option<&Path>) -> anyhow::Result<Library> {
+    let mut library = Library::default();
+    let Some(dir) = dir else {
+        return Ok(library);
+    };
+    let mut todo = vec![dir.to_path_buf()];
+    let mut files = Vec::new();
+    while let Some(d) = todo.pop() {
+        let entries = std::fs::read_dir(&d)
+            .with_context(|| format!("--fixtures {}: cannot read it", d.display()))?;
+        for e in entries {
+            let path = e
+                .with_context(|| format!("--fixtures {}: cannot read it", d.display()))?
+                .path();
+            if path.is_dir() {
+                todo.push(path);
+            } else {
+                files.push(path);
+            }
+        }
+    }
+    files.sort();
+    for path in files {
+        let ext = path
+            .extension()
+            .map(|e| e.to_string_lossy().to_ascii_lowercase())
+            .unwrap_or_default();
+        if ext != "gdtf" && ext != "json" {
+            continue;
+        }
+        let bytes =
+            std::fs::read(&path).with_context(|| format!("{}: cannot read it", path.display()))?;
+        let shown = path.display().to_string();
+        let relative = path
+            .strip_prefix(dir)
+            .unwrap_or(&path)
+            .to_string_lossy()
+            .into_owned();
+        match visobjd_rig::kind(&shown, &bytes)? {
+            Kind::Gdtf => library.add_gdtf(&shown, &bytes)?,
+            Kind::Ofl => library
+                .add_ofl(&relative, &bytes)
+                .map_err(|e| anyhow::anyhow!("{}: {}", dir.display(), e))?,
+            _ => bail!("{shown}: in --fixtures but not a GDTF or an Open Fixture Library file"),
+        }
+    }
+    Ok(library)
 }
 
 /// The scene folder's scene.toml as written, if there is one.
@@ -94,10 +183,10 @@ fn basis_path(channel: u32) -> String {
     format!("basis/{channel:03}.exr")
 }
 
-/// Builds or updates the scene in `out` from `rig`.
-fn import_rig(file: &str, rig: &Rig, out: &Path, prune: bool) -> anyhow::Result<()> {
+/// Builds or updates the scene in `out` from `rig` (`name`: the name a new scene gets).
+fn import_rig(file: &str, name: &str, rig: &Rig, out: &Path, prune: bool) -> anyhow::Result<()> {
     let old = existing(out)?;
-    let scene = merge(file, rig, old.as_ref(), prune);
+    let scene = merge(rig, name, old.as_ref(), prune);
     let lights = scene.file.light.len();
     if lights == 0 {
         let mut why = rig.needs_profiles();
@@ -173,12 +262,10 @@ struct Merged {
 /// path, the groups given in visobjd to lights whose source has none, and (unless
 /// `prune`) the lights the source does not make (absent, or of a type that needs a
 /// profile).
-fn merge(file: &str, rig: &Rig, old: Option<&SceneFile>, prune: bool) -> Merged {
+fn merge(rig: &Rig, name: &str, old: Option<&SceneFile>, prune: bool) -> Merged {
     let empty = SceneFile::default();
     let old = old.unwrap_or(&empty);
-    let stem = Path::new(file)
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned());
+    let stem = Some(name.to_string()).filter(|n| !n.is_empty());
     let mut lights: Vec<LightFile> = Vec::new();
     let mut profiles: Vec<ProfileFile> = Vec::new();
     let mut new = Vec::new();
@@ -190,7 +277,9 @@ fn merge(file: &str, rig: &Rig, old: Option<&SceneFile>, prune: bool) -> Merged 
         else {
             continue;
         };
-        if !profiles.iter().any(|p| p.name == profile.name) {
+        // A built-in profile (an Eos dimmer) is known to every scene without a table.
+        let built_in = Profile::built_in(&profile.name).is_some_and(|b| &b == profile);
+        if !built_in && !profiles.iter().any(|p| p.name == profile.name) {
             profiles.push(profile.to_file());
         }
         let before = old.light.iter().find(|l| l.channel == f.channel);

@@ -81,6 +81,15 @@ impl Decoder {
         }
     }
 
+    /// A decoder for a stream whose framing is known beforehand (a client that chose it),
+    /// so a SLIP peer that does not open with END is still read as SLIP.
+    pub fn with_framing(framing: Framing, max: usize) -> Decoder {
+        Decoder {
+            framing: Some(framing),
+            ..Decoder::new(max)
+        }
+    }
+
     /// The framing the stream turned out to use (None before its first byte).
     pub fn framing(&self) -> Option<Framing> {
         self.framing
@@ -291,6 +300,18 @@ mod tests {
         d.feed(&[0], &mut out);
         assert_eq!(d.framing(), Some(Framing::LengthPrefix));
         assert!(out.is_empty());
+    }
+
+    #[test]
+    fn a_known_framing_does_not_wait_for_the_first_byte() {
+        // A SLIP peer that only ends its frames with END (RFC 1055 allows it).
+        let mut d = Decoder::with_framing(Framing::Slip, MAX_FRAME);
+        let mut out = Vec::new();
+        d.feed(&[b'a', b'b', END, 0, 1, END], &mut out);
+        assert_eq!(
+            out,
+            [Frame::Packet(b"ab".to_vec()), Frame::Packet(vec![0, 1])]
+        );
     }
 
     #[test]

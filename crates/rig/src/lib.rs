@@ -8,6 +8,7 @@
 //! A fixture type that cannot become a profile is kept with the reason and listed
 //! ("needs a profile: ..."), never guessed.
 
+pub mod eos;
 pub mod gdtf;
 pub mod mvr;
 pub mod ofl;
@@ -168,9 +169,9 @@ impl Rig {
                     .filter(|f| f.fixture_type == i)
                     .map(|f| f.channel)
                     .collect();
-                let size = t
-                    .footprint
-                    .map_or(String::new(), |n| format!(" ({n} channels)"));
+                let size = t.footprint.map_or(String::new(), |n| {
+                    format!(" ({n} channel{})", if n == 1 { "" } else { "s" })
+                });
                 Some(format!(
                     "needs a profile: {}{size}, {}: {why}",
                     t.name,
@@ -253,6 +254,80 @@ impl Library {
         let (_, t) = self.ofl.iter().find(|(_, t)| eq(&t.name))?;
         Some(t.fixture_type(mode))
     }
+
+    /// A fixture type by an Eos name: `manufacturer` and `model` with the mode in it, as
+    /// Eos names its types (`JB_Lighting`, `P18_Profile_Mk2_HP_M1`). Names are compared by
+    /// their letters and digits only, case-insensitive ([`eos::compact`]). A GDTF file
+    /// matches when its `Manufacturer` is the manufacturer; an OFL file (which keeps its
+    /// manufacturer in its path, `fixtures/<manufacturer>/<name>.json`) when its path
+    /// relative to the library starts with it (`cameo-root-par-6.json`,
+    /// `cameo/root-par-6.json`). The model must then be the fixture's name (GDTF `Name` or
+    /// `LongName`, OFL `name`) followed by a mode's name (OFL: or `shortName`), or the name
+    /// alone for a type with one mode. `None` when nothing matches; an error (the type
+    /// needs a profile, nothing is guessed) when several modes do.
+    pub fn find_eos(&self, manufacturer: &str, model: &str) -> Option<Result<FixtureType, String>> {
+        let maker = eos::compact(manufacturer);
+        let model = eos::compact(model);
+        if maker.is_empty() || model.is_empty() {
+            return None;
+        }
+        let fits = |names: &[&str], modes: &[Vec<&str>], i: usize| {
+            names.iter().any(|n| {
+                let n = eos::compact(n);
+                !n.is_empty()
+                    && (modes[i]
+                        .iter()
+                        .any(|m| model == format!("{n}{}", eos::compact(m)))
+                        || (modes.len() == 1 && model == n))
+            })
+        };
+        let mut found: Vec<Result<FixtureType, RigError>> = Vec::new();
+        for (_, t) in &self.gdtf {
+            if eos::compact(&t.manufacturer) != maker {
+                continue;
+            }
+            let modes: Vec<Vec<&str>> = t.modes.iter().map(|m| vec![m.name.as_str()]).collect();
+            for (i, m) in t.modes.iter().enumerate() {
+                if fits(&[&t.name, &t.long_name], &modes, i) {
+                    found.push(t.fixture_type(&m.name));
+                }
+            }
+        }
+        for (file, t) in &self.ofl {
+            if !eos::compact(file).starts_with(&maker) {
+                continue;
+            }
+            let modes: Vec<Vec<&str>> = t
+                .modes
+                .iter()
+                .map(|m| {
+                    std::iter::once(m.name.as_str())
+                        .chain(m.short_name.as_deref())
+                        .collect()
+                })
+                .collect();
+            for (i, m) in t.modes.iter().enumerate() {
+                if fits(&[&t.name], &modes, i) {
+                    found.push(t.fixture_type(&m.name));
+                }
+            }
+        }
+        match found.len() {
+            0 => None,
+            1 => Some(found.remove(0).map_err(|e| e.to_string())),
+            _ => Some(Err(format!(
+                "several fixture types match it: {}",
+                found
+                    .iter()
+                    .map(|t| match t {
+                        Ok(t) => t.name.clone(),
+                        Err(e) => e.to_string(),
+                    })
+                    .collect::<Vec<_>>()
+                    .join("; ")
+            ))),
+        }
+    }
 }
 
 /// What a source file is, told by its content.
@@ -264,6 +339,8 @@ pub enum Kind {
     Gdtf,
     /// JSON (an Open Fixture Library fixture).
     Ofl,
+    /// Text starting with a `START_...` block (an Eos CSV export).
+    EosCsv,
 }
 
 /// The kind of `bytes`, or a sentence saying why it is none of them.
@@ -289,10 +366,14 @@ pub fn kind(file: &str, bytes: &[u8]) -> Result<Kind, RigError> {
     if text.starts_with(b"{") {
         return Ok(Kind::Ofl);
     }
+    let text = text.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(text);
+    if text.starts_with(b"START_") {
+        return Ok(Kind::EosCsv);
+    }
     Err(RigError::new(
         file,
         None,
-        "not an MVR, a GDTF or an Open Fixture Library JSON file (Eos CSV is not supported yet)",
+        "not an MVR, a GDTF, an Open Fixture Library JSON file or an Eos CSV export",
     ))
 }
 
@@ -399,6 +480,7 @@ mod tests {
         assert_eq!(kind("a.json", b"  {\"name\": 1}"), Ok(Kind::Ofl));
         let e = kind("a.mvr", b"PK\x03\x04 broken").unwrap_err().to_string();
         assert!(e.starts_with("a.mvr: not a readable zip"), "{e}");
-        assert!(kind("a.csv", b"START_TARGETS").is_err());
+        assert_eq!(kind("a.csv", b"START_TARGETS"), Ok(Kind::EosCsv));
+        assert!(kind("a.txt", b"CHANNEL,LABEL").is_err());
     }
 }

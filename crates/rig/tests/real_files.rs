@@ -287,3 +287,64 @@ fn a_library_finds_types_by_the_names_a_console_patch_uses() {
         "JSON is not a GDTF"
     );
 }
+
+#[test]
+fn a_library_finds_types_by_their_eos_names() {
+    let mut library = visobjd_rig::Library::default();
+    for f in [
+        "BlenderDMX@LED_PAR_64_RGBW@v0.3.gdtf",
+        "etc-source-four-led-series-2-lustr.json",
+        "etc-colorsource-par-deep-blue.json",
+        "cameo-root-par-6.json",
+    ] {
+        let (name, bytes) = read(f);
+        if f.ends_with(".gdtf") {
+            library.add_gdtf(&name, &bytes).expect("gdtf");
+        } else {
+            library.add_ofl(&name, &bytes).expect("ofl");
+        }
+    }
+    fn find(library: &visobjd_rig::Library, maker: &str, model: &str) -> Result<String, String> {
+        match library.find_eos(maker, model) {
+            Some(Ok(t)) => Ok(t.name),
+            Some(Err(e)) => Err(e),
+            None => Err("none".to_string()),
+        }
+    }
+    let found = |maker: &str, model: &str| find(&library, maker, model);
+    // One mode ("Default"): the name alone will do, or with the mode.
+    assert_eq!(
+        found("BlenderDMX", "LED_PAR_64_RGBW"),
+        Ok("BlenderDMX LED PAR 64 RGBW (Default)".into())
+    );
+    assert_eq!(
+        found("blenderdmx", "LED_PAR_64_RGBW_Default"),
+        Ok("BlenderDMX LED PAR 64 RGBW (Default)".into())
+    );
+    // OFL: the manufacturer is the start of the file's name; modes by name or shortName
+    // ("HSI Plus 7" / "HSI+7").
+    assert_eq!(
+        found("ETC", "Source_Four_LED_Series_2_Lustr_HSI_Plus_7"),
+        Ok("Source Four LED Series 2 Lustr (HSI Plus 7)".into())
+    );
+    assert_eq!(
+        found("ETC", "Source_Four_LED_Series_2_Lustr_HSI+7"),
+        Ok("Source Four LED Series 2 Lustr (HSI Plus 7)".into())
+    );
+    assert_eq!(
+        found("Cameo", "ROOT_PAR_6_8-channel"),
+        Ok("ROOT PAR 6 (8-channel)".into())
+    );
+    // Several modes and no mode named: not guessed.
+    assert!(found("Cameo", "ROOT_PAR_6").is_err_and(|e| e == "none"));
+    // Another manufacturer's file does not match.
+    assert!(found("Chauvet", "ROOT_PAR_6_8-channel").is_err_and(|e| e == "none"));
+    assert!(found("ETC", "ColorSource_PAR_Deep_Blue_Nope").is_err_and(|e| e == "none"));
+    // The same type in two files: listed, not picked.
+    let (_, bytes) = read("cameo-root-par-6.json");
+    library
+        .add_ofl("cameo/root-par-6.json", &bytes)
+        .expect("ofl");
+    let e = find(&library, "Cameo", "ROOT_PAR_6_8-channel").expect_err("two files match");
+    assert!(e.starts_with("several fixture types match it"), "{e}");
+}

@@ -1,0 +1,353 @@
+//! `visobjd import eos://HOST[:PORT]`: the patch and groups read live from an ETC Eos
+//! console over OSC TCP. Blocking sockets: connecting and every read have a deadline, so a
+//! console that stops answering is a one-line error naming what was being read.
+//!
+//! The exchange (ETC's "Eos Integration via OSC"; the reply formats and the list
+//! convention are the rig crate's `eos` module): `/eos/get/patch/count`, then
+//! `/eos/get/patch/index/<i>` for every index (positions in the patch list, one channel
+//! part each, as ETCLabs' EosSyncLib counts them), likewise `/eos/get/group/count` and
+//! `/eos/get/group/index/<i>`. Requests go out a window ahead of the answers; replies are
+//! matched by the index they carry (their first argument), not by arrival order. Everything else the
+//! console sends (pings, the active channel, the command line, notes, augment3d) is skipped.
+
+use std::collections::BTreeMap;
+use std::io::{Read, Write};
+use std::net::{TcpStream, ToSocketAddrs};
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, bail};
+use rosc::{OscMessage, OscPacket, OscType};
+use visobjd_rig::eos::{self, Arg, EosChannel, EosGroup, EosPatch, Lists, Reply};
+
+use crate::osc::framing::{self, Decoder, Frame, Framing};
+use crate::osc::packet;
+
+/// Eos's OSC TCP port for OSC 1.0 (length-prefixed) packets.
+const PORT_LENGTH_PREFIX: u16 = 3032;
+/// Eos's OSC TCP port for OSC 1.1 (SLIP) packets.
+const PORT_SLIP: u16 = 3037;
+/// Index requests out at once (a few kB of replies each way).
+const WINDOW: usize = 32;
+
+/// Where and how to reach a console named by `source`; `None` when `source` is not an
+/// `eos://` or `eos+slip://` address.
+pub fn target(source: &str) -> Option<anyhow::Result<(String, Framing)>> {
+    let (rest, framing, port) = if let Some(r) = source.strip_prefix("eos://") {
+        (r, Framing::LengthPrefix, PORT_LENGTH_PREFIX)
+    } else if let Some(r) = source.strip_prefix("eos+slip://") {
+        (r, Framing::Slip, PORT_SLIP)
+    } else {
+        return None;
+    };
+    let rest = rest.trim_end_matches('/');
+    if rest.is_empty() || rest.contains('/') {
+        return Some(Err(anyhow::anyhow!(
+            "{source}: not a console address: write eos://HOST or eos://HOST:PORT"
+        )));
+    }
+    // A bare host (or a bracketed IPv6 address) takes the default port.
+    let has_port = match rest.rsplit_once(':') {
+        Some((host, p)) => {
+            !p.is_empty()
+                && p.bytes().all(|b| b.is_ascii_digit())
+                && (!host.contains(':') || host.ends_with(']'))
+        }
+        None => false,
+    };
+    let addr = if has_port {
+        rest.to_string()
+    } else {
+        format!("{rest}:{port}")
+    };
+    Some(Ok((addr, framing)))
+}
+
+/// A connection to the console.
+struct Console<'a> {
+    source: &'a str,
+    stream: TcpStream,
+    framing: Framing,
+    decoder: Decoder,
+    /// Messages decoded and not yet taken.
+    queue: std::collections::VecDeque<OscMessage>,
+    /// The longest the console may be silent.
+    quiet: Duration,
+}
+
+impl Console<'_> {
+    fn send(&mut self, addresses: &[String]) -> anyhow::Result<()> {
+        let mut bytes = Vec::new();
+        for a in addresses {
+            let msg = OscPacket::Message(OscMessage {
+                addr: a.clone(),
+                args: Vec::new(),
+            });
+            let p = rosc::encoder::encode(&msg).with_context(|| format!("cannot encode {a}"))?;
+            bytes.extend(framing::encode(self.framing, &p));
+        }
+        self.stream
+            .write_all(&bytes)
+            .with_context(|| format!("{}: cannot send to the console", self.source))
+    }
+
+    /// The next message, waiting at most `quiet` for it; `what` names what is being read.
+    fn next(&mut self, what: &dyn Fn() -> String) -> anyhow::Result<OscMessage> {
+        let deadline = Instant::now() + self.quiet;
+        let mut buf = [0u8; 8192];
+        loop {
+            if let Some(m) = self.queue.pop_front() {
+                return Ok(m);
+            }
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                bail!(
+                    "{}: the console stopped answering while reading {} (nothing for {} s)",
+                    self.source,
+                    what(),
+                    self.quiet.as_secs_f64()
+                );
+            }
+            self.stream
+                .set_read_timeout(Some(left))
+                .with_context(|| format!("{}: cannot set a read timeout", self.source))?;
+            let n = match self.stream.read(&mut buf) {
+                Ok(0) => bail!(
+                    "{}: the console closed the connection while reading {}",
+                    self.source,
+                    what()
+                ),
+                Ok(n) => n,
+                Err(e)
+                    if matches!(
+                        e.kind(),
+                        std::io::ErrorKind::WouldBlock
+                            | std::io::ErrorKind::TimedOut
+                            | std::io::ErrorKind::Interrupted
+                    ) =>
+                {
+                    continue;
+                }
+                Err(e) => bail!("{}: reading {}: {e}", self.source, what()),
+            };
+            let mut frames = Vec::new();
+            self.decoder.feed(&buf[..n], &mut frames);
+            for f in frames {
+                match f {
+                    Frame::Packet(p) => match packet::decode(&p) {
+                        Ok(ms) => self.queue.extend(ms),
+                        Err(e) => tracing::debug!("{}: skipped a packet: {e}", self.source),
+                    },
+                    Frame::Oversize { len, .. } => {
+                        tracing::debug!("{}: skipped a {len}-byte frame", self.source)
+                    }
+                }
+            }
+        }
+    }
+
+    /// Sends index requests up to [`WINDOW`] ahead of the `done` answered ones (`sent`: how
+    /// many went out), so neither side's socket buffers fill with a large show's replies
+    /// while the other is still writing.
+    fn request(
+        &mut self,
+        kind: &str,
+        sent: &mut usize,
+        done: usize,
+        n: usize,
+    ) -> anyhow::Result<()> {
+        let upto = n.min(done + WINDOW);
+        if *sent >= upto {
+            return Ok(());
+        }
+        let batch: Vec<String> = (*sent..upto)
+            .map(|i| format!("/eos/get/{kind}/index/{i}"))
+            .collect();
+        *sent = upto;
+        self.send(&batch)
+    }
+
+    /// Sends `count` and returns the number the console answers with.
+    fn count(&mut self, kind: &str) -> anyhow::Result<usize> {
+        self.send(&[format!("/eos/get/{kind}/count")])?;
+        let want = match kind {
+            "patch" => Reply::PatchCount,
+            _ => Reply::GroupCount,
+        };
+        loop {
+            let m = self.next(&|| format!("the {kind} count"))?;
+            if eos::reply(&m.addr) != want {
+                continue;
+            }
+            return m
+                .args
+                .first()
+                .map(arg)
+                .and_then(|a| match a {
+                    Arg::Int(n) => usize::try_from(n).ok(),
+                    _ => None,
+                })
+                .with_context(|| format!("{}: {} carries no count", self.source, m.addr));
+        }
+    }
+}
+
+fn arg(a: &OscType) -> Arg {
+    match a {
+        OscType::Int(i) => Arg::Int(i64::from(*i)),
+        OscType::Long(i) => Arg::Int(*i),
+        OscType::Float(f) => Arg::Float(f64::from(*f)),
+        OscType::Double(d) => Arg::Float(*d),
+        OscType::String(s) => Arg::Str(s.clone()),
+        other => Arg::Str(format!("{other:?}")),
+    }
+}
+
+/// The list index a whole reply carries (its first argument).
+fn index_of(list: &[Arg]) -> Option<usize> {
+    match list.first() {
+        Some(Arg::Int(i)) => usize::try_from(*i).ok(),
+        _ => None,
+    }
+}
+
+/// Reads the console's patch and groups. `quiet` is the longest the console may be silent.
+pub fn read(
+    source: &str,
+    addr: &str,
+    framing: Framing,
+    quiet: Duration,
+) -> anyhow::Result<EosPatch> {
+    let to = addr
+        .to_socket_addrs()
+        .with_context(|| format!("{source}: `{addr}` is not a HOST:PORT"))?
+        .next()
+        .with_context(|| format!("{source}: the host has no address"))?;
+    let stream = TcpStream::connect_timeout(&to, quiet)
+        .with_context(|| format!("{source}: cannot connect to {to}"))?;
+    stream
+        .set_write_timeout(Some(quiet))
+        .with_context(|| format!("{source}: cannot set a write timeout"))?;
+    let mut c = Console {
+        source,
+        stream,
+        framing,
+        decoder: Decoder::with_framing(framing, framing::MAX_FRAME),
+        queue: Default::default(),
+        quiet,
+    };
+
+    let n = c.count("patch")?;
+    let mut sent = 0;
+    let mut lists = Lists::default();
+    // By index and part: should a console answer one index with several parts, none is
+    // lost; the patch is in once every index has answered.
+    let mut parts: BTreeMap<(usize, u32), EosChannel> = BTreeMap::new();
+    let mut answered = std::collections::BTreeSet::new();
+    while answered.len() < n {
+        let done = answered.len();
+        c.request("patch", &mut sent, done, n)?;
+        let m = c.next(&|| format!("the patch ({done} of {n} entries in)"))?;
+        let Reply::Patch {
+            channel,
+            part,
+            piece,
+        } = eos::reply(&m.addr)
+        else {
+            continue;
+        };
+        let key = format!("patch/{channel}/{part}");
+        let args = m.args.iter().map(arg).collect();
+        let Some(list) = lists
+            .add(&key, piece, args)
+            .map_err(|e| anyhow::anyhow!("{source}: {e}"))?
+        else {
+            continue;
+        };
+        let Some(i) = index_of(&list).filter(|&i| i < n) else {
+            bail!(
+                "{source}: {}: the patch list's index is not one of 0..{n}",
+                m.addr
+            );
+        };
+        let entry =
+            eos::patch_entry(channel, part, &list).map_err(|e| anyhow::anyhow!("{source}: {e}"))?;
+        answered.insert(i);
+        parts.insert((i, part), entry);
+    }
+
+    let g = c.count("group")?;
+    let mut sent = 0;
+    // By group index: the group's number, its list, its channel list.
+    let mut mains: BTreeMap<usize, (String, Vec<Arg>)> = BTreeMap::new();
+    let mut members: BTreeMap<usize, Vec<Arg>> = BTreeMap::new();
+    while (0..g).any(|i| !mains.contains_key(&i) || !members.contains_key(&i)) {
+        let done = (0..g)
+            .filter(|i| mains.contains_key(i) && members.contains_key(i))
+            .count();
+        c.request("group", &mut sent, done, g)?;
+        let m = c.next(&|| format!("the groups ({done} of {g} in)"))?;
+        let Reply::Group {
+            number,
+            channels,
+            piece,
+        } = eos::reply(&m.addr)
+        else {
+            continue;
+        };
+        let key = format!("group/{number}/{channels}");
+        let args = m.args.iter().map(arg).collect();
+        let Some(list) = lists
+            .add(&key, piece, args)
+            .map_err(|e| anyhow::anyhow!("{source}: {e}"))?
+        else {
+            continue;
+        };
+        let Some(i) = index_of(&list).filter(|&i| i < g) else {
+            bail!(
+                "{source}: {}: the group list's index is not one of 0..{g}",
+                m.addr
+            );
+        };
+        if channels {
+            members.insert(i, list);
+        } else {
+            mains.insert(i, (number, list));
+        }
+    }
+    let mut groups: Vec<EosGroup> = Vec::new();
+    for (i, (number, list)) in &mains {
+        let channels = members.get(i).map(Vec::as_slice).unwrap_or_default();
+        groups.push(
+            eos::group_entry(number, list, channels)
+                .map_err(|e| anyhow::anyhow!("{source}: {e}"))?,
+        );
+    }
+    Ok(EosPatch {
+        channels: parts.into_values().collect(),
+        groups,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn console_addresses_take_the_default_port_of_their_framing() {
+        let t = |s: &str| target(s).map(|r| r.map_err(|e| e.to_string()));
+        assert_eq!(
+            t("eos://10.0.0.5").and_then(Result::ok),
+            Some(("10.0.0.5:3032".to_string(), Framing::LengthPrefix))
+        );
+        assert_eq!(
+            t("eos+slip://desk:4000").and_then(Result::ok),
+            Some(("desk:4000".to_string(), Framing::Slip))
+        );
+        assert_eq!(
+            t("eos://[::1]").and_then(Result::ok),
+            Some(("[::1]:3032".to_string(), Framing::LengthPrefix))
+        );
+        assert!(t("eos://").is_some_and(|r| r.is_err()));
+        assert!(t("plot.mvr").is_none());
+    }
+}

@@ -1,0 +1,201 @@
+#!/usr/bin/env python3
+"""A fake ETC Eos console for the import tests: serves a patch over OSC TCP on loopback.
+
+It answers as ETC's "Eos Integration via OSC" (Eos 2.6; in ETCLabs' EosSyncLib) documents:
+  /eos/get/patch/count         -> /eos/out/get/patch/count <n>
+  /eos/get/patch/index/<i>     -> /eos/out/get/patch/<ch>/<part>/list/<offset>/<total>
+                                  index, UID, label, manufacturer, model, address,
+                                  intensity address, level, gel, text 1-10, part count,
+                                  end address (21 arguments)
+  /eos/get/group/count         -> /eos/out/get/group/count <n>
+  /eos/get/group/index/<i>     -> /eos/out/get/group/<g>/list/0/3 (index, UID, label) and
+                                  /eos/out/get/group/<g>/channels/list/<offset>/<total>
+                                  (index, UID, channel ranges as strings)
+Every patch reply and every group channel list is split over two messages by offset (the
+OSC list convention), with unsolicited /eos/out/ping and /eos/out/active/chan messages in
+between, as a console with OSC TX on sends them all the time.
+
+The patch comes from an Eos CSV export read with Python's own csv module (the rows of one
+channel are its parts, in order; U/A and U/A<E addresses become absolute ones), so the
+console serves the same patch the CSV holds. Messages are built with python-osc; the TCP
+framing (OSC 1.0 length prefix, or SLIP with --slip) is written here.
+
+Usage: fake_eos.py --csv FILE [--group LABEL=1-2,11 ...] [--slip] [--hang-after N]
+Prints the port it listens on (127.0.0.1), then serves one connection.
+--hang-after N: answers N patch indexes, sends the first half of the next reply, then
+stays silent (the connection open) until the client goes away.
+"""
+
+import argparse
+import csv
+import socket
+import struct
+import sys
+
+from pythonosc.osc_message_builder import OscMessageBuilder
+from pythonosc.osc_message import OscMessage
+
+END, ESC, ESC_END, ESC_ESC = 0xC0, 0xDB, 0xDC, 0xDD
+
+
+def message(address, args):
+    b = OscMessageBuilder(address=address)
+    for a in args:
+        b.add_arg(a, "i" if isinstance(a, int) else "s")
+    return b.build().dgram
+
+
+def absolute(text):
+    """Absolute Eos address of U/A (or a plain number); 0 when empty."""
+    text = text.strip()
+    if not text:
+        return 0
+    if "/" in text:
+        u, a = text.split("/")
+        return (int(u) - 1) * 512 + int(a)
+    return int(text)
+
+
+def read_csv(path):
+    with open(path, newline="", encoding="utf-8") as f:
+        rows = list(csv.reader(f))
+    start = next(i for i, r in enumerate(rows) if r and r[0] == "START_CHANNELS")
+    header = rows[start + 1]
+    col = {name: i for i, name in enumerate(header)}
+    parts = []
+    seen = {}
+    for r in rows[start + 2:]:
+        if r and r[0] == "END_CHANNELS":
+            break
+        ch = int(r[col["CHANNEL"]])
+        seen[ch] = seen.get(ch, 0) + 1
+        addr = r[col["ADDRESS"]].strip()
+        first, end = (addr.split("<") + [None])[:2]
+        start_abs = absolute(first)
+        if end is None:
+            end_abs = start_abs
+        elif "/" in end:
+            end_abs = absolute(end)
+        else:
+            end_abs = (start_abs - 1) // 512 * 512 + int(end)
+        parts.append({
+            "channel": ch, "part": seen[ch], "label": r[col["LABEL"]],
+            "manufacturer": r[col["MANUFACTURER"]], "model": r[col["FIXTURE_TYPE"]],
+            "address": start_abs, "end": end_abs if start_abs else 0,
+        })
+    count = {}
+    for p in parts:
+        count[p["channel"]] = count.get(p["channel"], 0) + 1
+    for p in parts:
+        p["parts"] = count[p["channel"]]
+    return parts
+
+
+def uid(n):
+    return "%08X-0000-0000-0000-%012X" % (n, n)
+
+
+class Link:
+    def __init__(self, conn, slip):
+        self.conn = conn
+        self.slip = slip
+
+    def send(self, address, args):
+        d = message(address, args)
+        if self.slip:
+            body = bytearray([END])
+            for b in d:
+                body += {END: bytes([ESC, ESC_END]), ESC: bytes([ESC, ESC_ESC])}.get(b, bytes([b]))
+            body.append(END)
+            self.conn.sendall(bytes(body))
+        else:
+            self.conn.sendall(struct.pack(">I", len(d)) + d)
+
+    def noise(self):
+        self.send("/eos/out/ping", [])
+        self.send("/eos/out/active/chan", ["11 LED PAR 64 RGBW @ 0 [0]"])
+
+    def split(self, address, args, at):
+        """Sends `args` as two messages of one OSC list, split at position `at`."""
+        total = len(args)
+        self.send("%s/list/0/%d" % (address, total), args[:at])
+        self.noise()
+        self.send("%s/list/%d/%d" % (address, at, total), args[at:])
+
+
+def requests(conn, slip):
+    """OSC addresses the client sends, one at a time."""
+    buf = b""
+    while True:
+        data = conn.recv(4096)
+        if not data:
+            return
+        buf += data
+        if slip:
+            while bytes([END]) in buf:
+                frame, buf = buf.split(bytes([END]), 1)
+                frame = frame.replace(bytes([ESC, ESC_END]), bytes([END])).replace(bytes([ESC, ESC_ESC]), bytes([ESC]))
+                if frame:
+                    yield OscMessage(frame).address
+        else:
+            while len(buf) >= 4:
+                n = struct.unpack(">I", buf[:4])[0]
+                if len(buf) < 4 + n:
+                    break
+                frame, buf = buf[4:4 + n], buf[4 + n:]
+                yield OscMessage(frame).address
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--csv", required=True)
+    ap.add_argument("--group", action="append", default=[])
+    ap.add_argument("--slip", action="store_true")
+    ap.add_argument("--hang-after", type=int)
+    a = ap.parse_args()
+    parts = read_csv(a.csv)
+    groups = []
+    for g in a.group:
+        label, chans = g.split("=", 1)
+        groups.append((label, [c for c in chans.split(",") if c]))
+
+    srv = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    srv.bind(("127.0.0.1", 0))
+    srv.listen(1)
+    print(srv.getsockname()[1], flush=True)
+    conn, _ = srv.accept()
+    link = Link(conn, a.slip)
+    link.noise()
+    answered = 0
+    hung = False
+    for address in requests(conn, a.slip):
+        if hung:
+            continue
+        if address == "/eos/get/patch/count":
+            link.send("/eos/out/get/patch/count", [len(parts)])
+        elif address.startswith("/eos/get/patch/index/"):
+            i = int(address.rsplit("/", 1)[1])
+            p = parts[i]
+            args = [i, uid(i + 1), p["label"], p["manufacturer"], p["model"], p["address"],
+                    p["address"], 0, ""] + [""] * 10 + [p["parts"], p["end"]]
+            base = "/eos/out/get/patch/%d/%d" % (p["channel"], p["part"])
+            if a.hang_after is not None and answered == a.hang_after:
+                link.send("%s/list/0/%d" % (base, len(args)), args[:9])
+                hung = True
+                continue
+            link.split(base, args, 9)
+            answered += 1
+        elif address == "/eos/get/group/count":
+            link.send("/eos/out/get/group/count", [len(groups)])
+        elif address.startswith("/eos/get/group/index/"):
+            i = int(address.rsplit("/", 1)[1])
+            label, chans = groups[i]
+            n = i + 1
+            link.send("/eos/out/get/group/%d/list/0/3" % n, [i, uid(1000 + n), label])
+            link.split("/eos/out/get/group/%d/channels" % n, [i, uid(1000 + n)] + chans, 2)
+    conn.close()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
