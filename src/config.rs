@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
+use crate::backup::BackupConfig;
 use crate::eos::EosConfig;
 use visobjd_dmx::{InputConfig, OutputConfig};
 use visobjd_scene::describe_toml_error;
@@ -35,6 +36,8 @@ pub struct Config {
     pub http: HttpConfig,
     /// `visobjd capture`'s settings.
     pub capture: CaptureConfig,
+    /// `[backup]`: this daemon mirrors a main (none: it is a main, or alone).
+    pub backup: Option<BackupConfig>,
 }
 
 #[derive(Deserialize)]
@@ -50,6 +53,7 @@ struct ConfigFile {
     eos: EosConfig,
     http: HttpConfig,
     capture: CaptureConfig,
+    backup: Option<BackupConfig>,
 }
 
 impl Default for ConfigFile {
@@ -65,6 +69,7 @@ impl Default for ConfigFile {
             eos: EosConfig::default(),
             http: HttpConfig::default(),
             capture: CaptureConfig::default(),
+            backup: None,
         }
     }
 }
@@ -296,18 +301,23 @@ impl Config {
         if let Some(sacn) = &file.input.sacn {
             sacn.addresses().map_err(at)?;
         }
+        let mut output = file.output;
+        if let Some(backup) = &file.backup {
+            crate::backup::configure(backup, &mut output).map_err(at)?;
+        }
         Ok(Config {
             path: path.to_path_buf(),
             scene: resolve(&file.scene),
             references: resolve(&file.references),
             state_dir: resolve(&file.state_dir),
             osc: file.osc,
-            output: file.output,
+            output,
             input: file.input,
             generate: file.generate,
             eos: file.eos,
             http: file.http,
             capture: file.capture,
+            backup: file.backup,
         })
     }
 
