@@ -21,10 +21,10 @@ use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpStream;
 
 use crate::engine::{Engine, msg};
+use crate::osc::Peer;
 use crate::osc::args::Request;
 use crate::osc::framing::{self, Decoder, Frame, Framing};
 use crate::osc::packet::{self, Item};
-use crate::osc::Peer;
 use visobjd_dmx::OutputConfig;
 
 /// The `[backup]` section: present, this daemon is a backup of `main`.

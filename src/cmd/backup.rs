@@ -5,9 +5,9 @@ use std::sync::Arc;
 
 use rosc::OscMessage;
 
-use crate::osc::args;
 use crate::engine::Engine;
 use crate::osc::Peer;
+use crate::osc::args;
 use crate::osc::args::Request;
 
 pub enum Cmd {

@@ -137,14 +137,11 @@ impl Command {
                 c,
                 objective::Cmd::Edit(objective::Edit::List | objective::Edit::Palette { .. })
             ),
-            Command::Constraint(c) => {
-                !matches!(c, constraint::Cmd::Pins | constraint::Cmd::List)
-            }
+            Command::Constraint(c) => !matches!(c, constraint::Cmd::Pins | constraint::Cmd::List),
             Command::Console(_) | Command::Generate(_) | Command::Transfer(_) => true,
-            Command::Gallery(c) => !matches!(
-                c,
-                gallery::Cmd::Candidate { .. } | gallery::Cmd::Gallery
-            ),
+            Command::Gallery(c) => {
+                !matches!(c, gallery::Cmd::Candidate { .. } | gallery::Cmd::Gallery)
+            }
             Command::Live(c) => !matches!(c, live::Cmd::Live),
             Command::Looks(c) => !matches!(c, looks::Cmd::List),
             Command::Status(_) | Command::TestHook(_) => false,

@@ -274,8 +274,7 @@ impl Engine {
         }
         if peer.transport() == crate::osc::Transport::Udp {
             return Err(
-                "a backup subscribes over TCP (osc.tcp): it needs every command, in order"
-                    .into(),
+                "a backup subscribes over TCP (osc.tcp): it needs every command, in order".into(),
             );
         }
         let s = self.session();

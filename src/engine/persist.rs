@@ -215,7 +215,8 @@ fn apply_session(scene: &Scene, f: &SessionFile, s: &mut Session) -> Vec<String>
 /// files would hold now, as the JSON of `session.json`, `live.json` and `looks.json`.
 pub fn state_json(scene: &Scene, s: &Session) -> Result<[String; 3], String> {
     let snap = Snapshot::of(scene, s);
-    let text = |r: serde_json::Result<String>| r.map_err(|e| format!("cannot encode the state: {e}"));
+    let text =
+        |r: serde_json::Result<String>| r.map_err(|e| format!("cannot encode the state: {e}"));
     Ok([
         text(serde_json::to_string(&snap.session))?,
         text(serde_json::to_string(&snap.live))?,
