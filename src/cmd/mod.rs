@@ -132,7 +132,7 @@ impl Command {
     fn changes_state(&self) -> bool {
         match self {
             Command::Backup(c) => c.changes_state(),
-            Command::EosIn(c) => !matches!(c, eos_in::Cmd::Selection),
+            Command::EosIn(c) => !matches!(c, eos_in::Cmd::Selection | eos_in::Cmd::EosOut(None)),
             Command::Objective(c) => !matches!(
                 c,
                 objective::Cmd::Edit(objective::Edit::List | objective::Edit::Palette { .. })
