@@ -300,6 +300,10 @@ fn the_backup_mirrors_the_main_and_refuses_changes_from_others() {
         "{why}"
     );
     backup.err("/vo/generate", vec![]);
+    let state = vec![string("{}"), string("{}"), string("{}")];
+    backup.err("/vo/backup/state", state.clone());
+    let why = main.err("/vo/backup/state", state);
+    assert!(why.contains("only a backup"), "{why}");
     assert_eq!(mirror_of(&mut backup), before);
 
     // The wire: the main's look at its priority wins; the backup sends the same look

@@ -46,6 +46,12 @@ impl Cmd {
                 Ok(Vec::new())
             }
             Cmd::State(parts) => {
+                if e.main().is_none() {
+                    return Err(
+                        "only a backup takes a state, from its main: this daemon has no [backup]"
+                            .into(),
+                    );
+                }
                 e.install_state(&parts)?;
                 Ok(Vec::new())
             }
