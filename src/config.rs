@@ -351,6 +351,30 @@ mod tests {
     use super::*;
 
     #[test]
+    fn a_backup_sends_below_the_main_and_no_art_net() {
+        let path = Path::new("b.toml");
+        let backup = "[backup]\nmain = \"10.0.0.1:8000\"\n";
+        let c = Config::parse(path, &format!("{backup}[[output.sacn]]\npriority = 120\n")).unwrap();
+        assert_eq!(c.output.sacn[0].priority, 110);
+        assert_eq!(c.backup.map(|b| b.main), Some("10.0.0.1:8000".to_string()));
+        let c = Config::parse(path, "[[output.sacn]]\npriority = 120\n").unwrap();
+        assert_eq!((c.output.sacn[0].priority, c.backup), (120, None));
+        let e = Config::parse(
+            path,
+            &format!("{backup}[[output.sacn]]\n[[output.artnet]]\n"),
+        )
+        .unwrap_err();
+        assert!(
+            e.starts_with("b.toml: backup: a backup sends no Art-Net"),
+            "{e}"
+        );
+        let e = Config::parse(path, "[backup]\npriority = 5\n[[output.sacn]]\n").unwrap_err();
+        assert!(e.contains("backup.main ``"), "{e}");
+        let e = Config::parse(path, "[backup]\nmian = \"x:1\"\n").unwrap_err();
+        assert!(e.contains("mian"), "{e}");
+    }
+
+    #[test]
     fn empty_config_is_the_demo_on_loopback() {
         let c = Config::parse(Path::new("config/visobjd.toml"), "").unwrap();
         assert_eq!(c.scene, Path::new("config/../scenes/demo"));

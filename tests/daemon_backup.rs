@@ -373,6 +373,25 @@ fn kill_9_leaves_the_mains_last_look_and_a_restarted_main_takes_it_back() {
     }
     // The backup re-syncs from the restarted main's state.
     wait_following(&backup, 2);
+
+    // A main stopped cleanly terminates its streams: receivers take the backup at once,
+    // with the same look.
+    let stopped = Instant::now();
+    assert!(main.terminate().success());
+    let taken = merger.wait(PATIENCE, "the backup after SIGTERM", all_from(BACKUP));
+    eprintln!(
+        "the backup's look was on the merged wire {:.3} s after SIGTERM",
+        (taken.values().map(|f| f.at).min().expect("universes") - stopped).as_secs_f32()
+    );
+    main.restart();
+    merger.wait(PATIENCE, "the main again", all_from(MAIN));
+    for (u, f) in merger.since(stopped) {
+        assert_eq!(
+            f.dmx, last[&u],
+            "universe {u}: a frame after SIGTERM differs"
+        );
+    }
+    wait_following(&backup, 3);
     assert_eq!(backup.live(), main.live());
     main.ok(&format!("/vo/light/{ch}/level"), vec![int(12)], "/vo/light");
     let end = Instant::now() + PATIENCE;
