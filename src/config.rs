@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
+use crate::backup::BackupConfig;
 use crate::eos::EosConfig;
 use visobjd_dmx::{InputConfig, OutputConfig};
 use visobjd_scene::describe_toml_error;
@@ -35,6 +36,8 @@ pub struct Config {
     pub http: HttpConfig,
     /// `visobjd capture`'s settings.
     pub capture: CaptureConfig,
+    /// `[backup]`: this daemon mirrors a main (none: it is a main, or alone).
+    pub backup: Option<BackupConfig>,
 }
 
 #[derive(Deserialize)]
@@ -50,6 +53,7 @@ struct ConfigFile {
     eos: EosConfig,
     http: HttpConfig,
     capture: CaptureConfig,
+    backup: Option<BackupConfig>,
 }
 
 impl Default for ConfigFile {
@@ -65,6 +69,7 @@ impl Default for ConfigFile {
             eos: EosConfig::default(),
             http: HttpConfig::default(),
             capture: CaptureConfig::default(),
+            backup: None,
         }
     }
 }
@@ -296,18 +301,23 @@ impl Config {
         if let Some(sacn) = &file.input.sacn {
             sacn.addresses().map_err(at)?;
         }
+        let mut output = file.output;
+        if let Some(backup) = &file.backup {
+            crate::backup::configure(backup, &mut output).map_err(at)?;
+        }
         Ok(Config {
             path: path.to_path_buf(),
             scene: resolve(&file.scene),
             references: resolve(&file.references),
             state_dir: resolve(&file.state_dir),
             osc: file.osc,
-            output: file.output,
+            output,
             input: file.input,
             generate: file.generate,
             eos: file.eos,
             http: file.http,
             capture: file.capture,
+            backup: file.backup,
         })
     }
 
@@ -339,6 +349,30 @@ pub fn permits(allow: &[Cidr], ip: IpAddr) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_backup_sends_below_the_main_and_no_art_net() {
+        let path = Path::new("b.toml");
+        let backup = "[backup]\nmain = \"10.0.0.1:8000\"\n";
+        let c = Config::parse(path, &format!("{backup}[[output.sacn]]\npriority = 120\n")).unwrap();
+        assert_eq!(c.output.sacn[0].priority, 110);
+        assert_eq!(c.backup.map(|b| b.main), Some("10.0.0.1:8000".to_string()));
+        let c = Config::parse(path, "[[output.sacn]]\npriority = 120\n").unwrap();
+        assert_eq!((c.output.sacn[0].priority, c.backup), (120, None));
+        let e = Config::parse(
+            path,
+            &format!("{backup}[[output.sacn]]\n[[output.artnet]]\n"),
+        )
+        .unwrap_err();
+        assert!(
+            e.starts_with("b.toml: backup: a backup sends no Art-Net"),
+            "{e}"
+        );
+        let e = Config::parse(path, "[backup]\npriority = 5\n[[output.sacn]]\n").unwrap_err();
+        assert!(e.contains("backup.main ``"), "{e}");
+        let e = Config::parse(path, "[backup]\nmian = \"x:1\"\n").unwrap_err();
+        assert!(e.contains("mian"), "{e}");
+    }
 
     #[test]
     fn empty_config_is_the_demo_on_loopback() {

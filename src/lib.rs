@@ -5,6 +5,7 @@
 //! export ([`eos`]). The method, the compositor, DMX, the scene model, durable files and the
 //! virtual stage are crates of their own (`crates/`; see `docs/architecture.md`).
 
+pub mod backup;
 pub mod cli;
 pub mod cmd;
 pub mod config;

@@ -147,6 +147,23 @@ async fn serve(config: &Config, engine: &Arc<Engine>) -> anyhow::Result<()> {
             changes,
         )));
     }
+    if let Some(backup) = &config.backup {
+        tracing::info!(
+            "backup of {}: sACN at priority {}, commands only from the main",
+            backup.main,
+            config
+                .output
+                .sacn
+                .iter()
+                .map(|d| d.priority.to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+        tasks.push(tokio::spawn(crate::backup::mirror(
+            Arc::clone(engine),
+            backup.main.trim().to_string(),
+        )));
+    }
     if let Some(period) = sd_notify::watchdog_enabled() {
         tasks.push(tokio::spawn(watchdog(Arc::clone(engine), period)));
     }

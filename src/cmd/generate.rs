@@ -12,6 +12,9 @@ use crate::osc::args::Request;
 pub enum Cmd {
     /// Starts a generate; the reply, `/vo/generated`, goes to the peer when it is done.
     Generate,
+    /// Generates once with this seed, leaving the seed setting alone (what a main sends
+    /// its backups, so their galleries are the main's).
+    Seeded(u64),
     Set(Setting),
 }
 
@@ -26,6 +29,8 @@ impl Cmd {
     pub fn parse(req: &Request) -> Result<Option<Cmd>, String> {
         Ok(Some(if req.matches("/vo/generate").is_some() {
             Cmd::Generate
+        } else if req.matches("/vo/generate/seeded").is_some() {
+            Cmd::Seeded(int_arg(req, 0, "seed", 1, i64::from(i32::MAX))? as u64)
         } else if req.matches("/vo/generate/count").is_some() {
             Cmd::Set(Setting::Count(int_arg(req, 0, "count", 1, 1000)? as u32))
         } else if req.matches("/vo/generate/clusters").is_some() {
@@ -42,7 +47,11 @@ impl Cmd {
     pub fn apply(self, e: &Arc<Engine>, peer: &Peer) -> Result<Vec<OscMessage>, String> {
         let setting = match self {
             Cmd::Generate => {
-                e.generate(peer)?;
+                e.generate(peer, None)?;
+                return Ok(Vec::new());
+            }
+            Cmd::Seeded(seed) => {
+                e.generate(peer, Some(seed))?;
                 return Ok(Vec::new());
             }
             Cmd::Set(setting) => setting,

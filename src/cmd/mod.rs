@@ -5,6 +5,7 @@
 //!
 //! A command that fails changes nothing and answers one `/vo/error`.
 
+mod backup;
 mod console;
 mod constraint;
 mod eos_in;
@@ -30,6 +31,7 @@ use visobjd_scene::look::Look;
 
 /// Every command the daemon understands.
 enum Command {
+    Backup(backup::Cmd),
     EosIn(eos_in::Cmd),
     Objective(objective::Cmd),
     Constraint(constraint::Cmd),
@@ -45,6 +47,9 @@ enum Command {
 
 impl Command {
     fn parse(req: &Request) -> Result<Command, String> {
+        if let Some(c) = backup::Cmd::parse(req)? {
+            return Ok(Command::Backup(c));
+        }
         if let Some(c) = eos_in::Cmd::parse(req)? {
             return Ok(Command::EosIn(c));
         }
@@ -87,6 +92,7 @@ impl Command {
     /// The address family, for [`parse`]'s callers.
     fn family(&self) -> &'static str {
         match self {
+            Command::Backup(_) => "backup",
             Command::EosIn(_) => "eos",
             Command::Objective(_) => "objective",
             Command::Constraint(_) => "constraint",
@@ -103,6 +109,7 @@ impl Command {
 
     fn apply(self, e: &Arc<Engine>, peer: &Peer) -> Result<Vec<OscMessage>, String> {
         match self {
+            Command::Backup(c) => c.apply(e, peer),
             Command::EosIn(c) => c.apply(e),
             Command::Objective(c) => c.apply(e),
             Command::Constraint(c) => c.apply(e),
@@ -118,12 +125,82 @@ impl Command {
     }
 }
 
+impl Command {
+    /// Whether the command changes the session (the objectives, constraints, gallery,
+    /// looks or stage): such commands are mirrored to a backup, and a backup refuses them
+    /// from anyone but its main. Queries, subscriptions, pings and exports do not.
+    fn changes_state(&self) -> bool {
+        match self {
+            Command::Backup(c) => c.changes_state(),
+            Command::EosIn(c) => !matches!(c, eos_in::Cmd::Selection | eos_in::Cmd::EosOut(None)),
+            Command::Objective(c) => !matches!(
+                c,
+                objective::Cmd::Edit(objective::Edit::List | objective::Edit::Palette { .. })
+            ),
+            Command::Constraint(c) => !matches!(c, constraint::Cmd::Pins | constraint::Cmd::List),
+            Command::Console(_) | Command::Generate(_) | Command::Transfer(_) => true,
+            Command::Gallery(c) => {
+                !matches!(c, gallery::Cmd::Candidate { .. } | gallery::Cmd::Gallery)
+            }
+            Command::Live(c) => !matches!(c, live::Cmd::Live),
+            Command::Looks(c) => !matches!(c, looks::Cmd::List),
+            Command::Status(_) | Command::TestHook(_) => false,
+        }
+    }
+
+    /// Whether the command itself is forwarded to backups once accepted. A generate is
+    /// forwarded by the engine instead, with the seed it chose (`/vo/generate/seeded`);
+    /// the backup's own messages are not forwarded.
+    fn forwarded(&self) -> bool {
+        self.changes_state()
+            && !matches!(
+                self,
+                Command::Generate(generate::Cmd::Generate | generate::Cmd::Seeded(_))
+                    | Command::Backup(_)
+            )
+    }
+}
+
 pub use console::follow as follow_console;
 pub use gallery::sizes as gallery_sizes;
 
-/// Parses and applies one message: its replies, or the sentence for `/vo/error`.
+/// Parses and applies one message: its replies, or the sentence for `/vo/error`. A backup
+/// answers queries but refuses changes: they come from its main.
 pub fn run(e: &Arc<Engine>, req: &Request, peer: &Peer) -> Result<Vec<OscMessage>, String> {
-    Command::parse(req)?.apply(e, peer)
+    let command = Command::parse(req)?;
+    if let Some(main) = e.main()
+        && command.changes_state()
+    {
+        return Err(format!("this is a backup of {main}; send to the main"));
+    }
+    apply(e, command, req, peer)
+}
+
+/// Parses and applies one message a backup received from its main (src/backup.rs): the
+/// same path as [`run`], changes allowed.
+pub fn mirror(e: &Arc<Engine>, req: &Request, peer: &Peer) -> Result<Vec<OscMessage>, String> {
+    apply(e, Command::parse(req)?, req, peer)
+}
+
+/// Applies a parsed command; an accepted change is forwarded to the backups (at its
+/// commit, see [`crate::backup::Pending`], or here if no commit took it).
+fn apply(
+    e: &Arc<Engine>,
+    command: Command,
+    req: &Request,
+    peer: &Peer,
+) -> Result<Vec<OscMessage>, String> {
+    let forward = command.forwarded().then(|| OscMessage {
+        addr: req.path(),
+        args: req.args.clone(),
+    });
+    crate::backup::Pending::set(forward);
+    let applied = command.apply(e, peer);
+    let left = crate::backup::Pending::take();
+    if let (Ok(_), Some(m)) = (&applied, left) {
+        e.forward(&m);
+    }
+    applied
 }
 
 /// Reads one received packet (a datagram or a stream frame) the way the daemon does, up to

@@ -88,6 +88,12 @@ pub struct Engine {
     test_hooks: bool,
     /// Test hook: the next generate panics.
     panic_generate: AtomicBool,
+    /// `[backup] main`: this daemon is a backup of that main (src/backup.rs).
+    main: Option<String>,
+    /// The backups following this main: their connections, in subscription order.
+    backups: Mutex<Vec<Peer>>,
+    /// Generate count, clusters and fade of a fresh session (a backup's re-sync).
+    defaults: (u32, u32, f32),
 }
 
 /// Set in the environment, enables the `/vo/test/...` fault hooks (never in production).
@@ -132,6 +138,13 @@ impl Engine {
             eos: config.eos.clone(),
             test_hooks: std::env::var_os(TEST_HOOKS).is_some(),
             panic_generate: AtomicBool::new(false),
+            main: config.backup.as_ref().map(|b| b.main.trim().to_string()),
+            backups: Mutex::new(Vec::new()),
+            defaults: (
+                config.generate.count,
+                config.generate.clusters,
+                config.output.fade_s,
+            ),
             stage,
         })
     }
@@ -166,6 +179,9 @@ impl Engine {
     ) -> Result<Vec<OscMessage>, String> {
         let mut s = self.session();
         let outcome = change(&mut s)?;
+        if outcome.show != Show::Nothing || outcome.persist != Persist::No {
+            self.forward_pending();
+        }
         match outcome.show {
             Show::Nothing => {}
             Show::Look(fade_s) => self.with_output(|o| o.set_look(s.live.clone(), fade_s)),
@@ -211,8 +227,88 @@ impl Engine {
         self.files
             .save_looks(&looks)
             .map_err(|e| format!("cannot write the saved looks in the state folder: {e}"))?;
-        self.session().looks = looks;
+        let mut s = self.session();
+        s.looks = looks;
+        self.forward_pending();
         Ok(out)
+    }
+
+    /// The main this daemon is a backup of (`[backup] main`), if it is one.
+    pub fn main(&self) -> Option<&str> {
+        self.main.as_deref()
+    }
+
+    /// Sends an accepted command to every backup, in the order called; a backup whose
+    /// connection closed or fell behind (its queue overflowed) is dropped: it re-syncs
+    /// from the state when it subscribes again.
+    pub fn forward(&self, m: &OscMessage) {
+        let mut backups = self.backups.lock().unwrap_or_else(|p| p.into_inner());
+        backups.retain(|b| {
+            let sent = b.reply(std::slice::from_ref(m));
+            if !sent {
+                tracing::warn!(
+                    "backup {} dropped: its connection closed or fell behind; it re-syncs when it subscribes again",
+                    b.addr()
+                );
+            }
+            sent
+        });
+    }
+
+    /// Forwards the command this thread applies, if it was not yet (call with the session
+    /// locked, so backups get changes in the order the session took them).
+    fn forward_pending(&self) {
+        if let Some(m) = crate::backup::Pending::take() {
+            self.forward(&m);
+        }
+    }
+
+    /// `/vo/backup/subscribe` from `peer`: sends it the state and, from then on, every
+    /// accepted command. The session stays locked meanwhile, so no change falls between
+    /// the state and the first forwarded command.
+    pub fn attach_backup(&self, peer: &Peer) -> Result<(), String> {
+        if let Some(main) = &self.main {
+            return Err(format!(
+                "this daemon is itself a backup of {main}; a backup has no backups"
+            ));
+        }
+        if peer.transport() == crate::osc::Transport::Udp {
+            return Err(
+                "a backup subscribes over TCP (osc.tcp): it needs every command, in order".into(),
+            );
+        }
+        let s = self.session();
+        let state = persist::state_json(&self.stage.scene, &s)?;
+        let state = msg("/vo/backup/state", state.map(OscType::String).into());
+        if !peer.reply(&[state]) {
+            return Err("the state could not be sent: the connection is gone".into());
+        }
+        let mut backups = self.backups.lock().unwrap_or_else(|p| p.into_inner());
+        backups.push(peer.clone());
+        tracing::info!("backup {} subscribed: {} now", peer.addr(), backups.len());
+        Ok(())
+    }
+
+    /// A backup takes its main's state (`/vo/backup/state`): the session is replaced, the
+    /// stage shows the main's live look at once, and the state files are written.
+    pub fn install_state(&self, parts: &[String; 3]) -> Result<(), String> {
+        let _in_order = self.looks_io.lock().unwrap_or_else(|p| p.into_inner());
+        let (count, clusters, fade_s) = self.defaults;
+        let scene = &self.stage.scene;
+        self.commit(|s| {
+            let fresh = Session::new(scene, count, clusters, fade_s);
+            let (taken, lost) = persist::from_state(scene, parts, fresh)?;
+            for what in lost {
+                tracing::error!("backup: the main's state: not taken: {what}");
+            }
+            *s = taken;
+            Ok(Outcome::replies(Vec::new()).show_look(0.0).saved().pushed())
+        })?;
+        self.commit(|_| Ok(Outcome::replies(Vec::new()).show_master()))?;
+        let looks = self.session().looks.clone();
+        self.files
+            .save_looks(&looks)
+            .map_err(|e| format!("cannot write the saved looks in the state folder: {e}"))
     }
 
     /// Runs `f` on the console input, if one is configured and still running.
@@ -318,9 +414,10 @@ impl Engine {
         })
     }
 
-    /// Starts a generate on its own thread; the reply (`/vo/generated`) goes to `peer`
-    /// when it is done. Refused while another runs.
-    pub fn generate(self: &Arc<Self>, peer: &Peer) -> Result<(), String> {
+    /// Starts a generate on its own thread, with `seed` or the session's seed setting; the
+    /// reply (`/vo/generated`) goes to `peer` when it is done. Refused while another runs.
+    /// Backups are sent `/vo/generate/seeded` with the seed it draws with.
+    pub fn generate(self: &Arc<Self>, peer: &Peer, seed: Option<u64>) -> Result<(), String> {
         if self.generating.swap(true, Ordering::SeqCst) {
             return Err("a generate is already running; wait for /vo/generated".into());
         }
@@ -334,11 +431,12 @@ impl Engine {
         let base = s.base.clone();
         let (count, clusters) = (s.count as usize, s.clusters as usize);
         // Seeds travel as OSC int32: a random one stays in 1..=i32::MAX so it can be replayed.
-        let seed = if s.seed == 0 {
-            u64::from(rand::random::<u32>() >> 1).max(1)
-        } else {
-            s.seed
+        let seed = match seed {
+            Some(seed) => seed,
+            None if s.seed == 0 => u64::from(rand::random::<u32>() >> 1).max(1),
+            None => s.seed,
         };
+        self.forward(&msg("/vo/generate/seeded", vec![OscType::Int(seed as i32)]));
         let serial = self.generates.fetch_add(1, Ordering::SeqCst) + 1;
         let mut started_msgs = vec![msg("/vo/progress", vec![OscType::Float(0.0)])];
         started_msgs.extend(self.feedback(&s));

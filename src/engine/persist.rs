@@ -211,6 +211,45 @@ fn apply_session(scene: &Scene, f: &SessionFile, s: &mut Session) -> Vec<String>
     lost
 }
 
+/// The state a main sends a backup that subscribes (`/vo/backup/state`): what the state
+/// files would hold now, as the JSON of `session.json`, `live.json` and `looks.json`.
+pub fn state_json(scene: &Scene, s: &Session) -> Result<[String; 3], String> {
+    let snap = Snapshot::of(scene, s);
+    let text =
+        |r: serde_json::Result<String>| r.map_err(|e| format!("cannot encode the state: {e}"));
+    Ok([
+        text(serde_json::to_string(&snap.session))?,
+        text(serde_json::to_string(&snap.live))?,
+        text(serde_json::to_string(&LooksFile {
+            looks: s.looks.clone(),
+        }))?,
+    ])
+}
+
+/// The session a backup takes from its main's [`state_json`]: a fresh session (no gallery,
+/// as after the main's own restart) holding what the main's files would restore, with what
+/// could not be taken (item by item). Err, when a part does not read or its looks do not
+/// fit this scene, changes nothing.
+pub fn from_state(
+    scene: &Scene,
+    parts: &[String; 3],
+    fresh: Session,
+) -> Result<(Session, Vec<String>), String> {
+    let read = |what: &str, e: serde_json::Error| format!("the main's {what} does not read: {e}");
+    let file: SessionFile = serde_json::from_str(&parts[0]).map_err(|e| read("session", e))?;
+    let live: LiveFile = serde_json::from_str(&parts[1]).map_err(|e| read("live look", e))?;
+    let looks: LooksFile = serde_json::from_str(&parts[2]).map_err(|e| read("looks", e))?;
+    let fit = |e: String| format!("the main's live look does not fit this scene: {e}");
+    let mut s = fresh;
+    s.live = live.live.to_look(scene).map_err(fit)?;
+    s.base = live.base.to_look(scene).map_err(fit)?;
+    s.master = live.master.clamp(0.0, 1.0);
+    s.blackout = live.blackout;
+    s.looks = looks.looks;
+    let lost = apply_session(scene, &file, &mut s);
+    Ok((s, lost))
+}
+
 /// The snapshot the background writer persists.
 pub struct Snapshot {
     live: LiveFile,

@@ -1127,6 +1127,11 @@ pub struct Setup {
     /// A scene folder to run instead of the built test stage (copied in; the
     /// references are the test stage's).
     pub scene_from: Option<PathBuf>,
+    /// Where sACN goes instead of the daemon's own [`Wire`] (a test's own receiver that
+    /// several daemons send to), on 127.0.0.1.
+    pub sacn_port: Option<u16>,
+    /// Whether the config has an `[[output.artnet]]` (a backup may not).
+    pub artnet: bool,
 }
 
 pub const LOCALHOST: IpAddr = IpAddr::V4(Ipv4Addr::LOCALHOST);
@@ -1141,6 +1146,8 @@ impl Default for Setup {
             extra: String::new(),
             env: Vec::new(),
             scene_from: None,
+            sacn_port: None,
+            artnet: true,
         }
     }
 }
@@ -1471,19 +1478,21 @@ bind = "127.0.0.1:0"
 priority = 100
 source_name = "visobjd test"
 
-[[output.artnet]]
-destination = "127.0.0.1"
-port = {artnet}
-bind = "127.0.0.1:0"
-universe_offset = {ARTNET_OFFSET}
-
+{artnet}
 [generate]
 count = {COUNT}
 clusters = {CLUSTERS}
 "#,
         udp = SocketAddr::new(setup.udp, port),
         tcp = SocketAddr::new(setup.tcp, port),
-        sacn = wire.sacn_port,
-        artnet = wire.artnet_port,
+        sacn = setup.sacn_port.unwrap_or(wire.sacn_port),
+        artnet = if setup.artnet {
+            format!(
+                "[[output.artnet]]\ndestination = \"127.0.0.1\"\nport = {}\nbind = \"127.0.0.1:0\"\nuniverse_offset = {ARTNET_OFFSET}\n",
+                wire.artnet_port
+            )
+        } else {
+            String::new()
+        },
     )
 }
