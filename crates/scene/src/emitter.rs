@@ -11,6 +11,9 @@
 //! allocation, no randomness, the same bits on every run.
 
 pub mod colour;
+pub mod model;
+
+pub use model::ColourModel;
 
 use colour::{xyz_to_linear_srgb, xyz_to_uv};
 
