@@ -205,4 +205,23 @@ mod tests {
             }
         }
     }
+
+    #[test]
+    fn a_trace_inside_the_gamut_edge_still_solves() {
+        // A red read back from DMX carries a trace of blue from rounding: it lies a hair
+        // inside the red-blue edge, where the programme is ill-conditioned.
+        for name in ["rgb", "rgbw", "rgba"] {
+            for trace in [1e-12f32, 1e-9, 9.585_502e-8, 4.553_116_4e-7, 1e-6] {
+                let s = model(name).solve([1.0, 0.0, trace]);
+                assert!((s.levels()[0] - 1.0).abs() < 1e-5, "{name} {trace}: {s:?}");
+                let s = model(name).solve([0.0, 1.0, trace]);
+                assert!((s.levels()[1] - 1.0).abs() < 1e-5, "{name} {trace}: {s:?}");
+                let s = model(name).solve([trace, 1.0, 1.0]);
+                assert!(
+                    s.levels().iter().any(|&l| l > 0.99),
+                    "{name} {trace}: {s:?}"
+                );
+            }
+        }
+    }
 }
