@@ -71,6 +71,14 @@ impl ColourModel {
         if self.emitters.is_empty() {
             return level.multiplier();
         }
+        // Dark needs no solve, and white is the light's white by definition: the two
+        // levels a sampled look holds most often, at no cost.
+        if level.intensity == 0.0 {
+            return [0.0; 3];
+        }
+        if level.color == [1.0; 3] {
+            return [level.intensity; 3];
+        }
         let relative = self.relative(self.solve(level.color).reached);
         relative.map(|v| v as f32 * level.intensity)
     }
