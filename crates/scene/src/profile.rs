@@ -24,7 +24,7 @@ pub enum Slot {
     Green,
     /// Additive emitter.
     Blue,
-    /// White emitter, extracted from the colour's common part.
+    /// White emitter.
     White,
     /// Amber emitter.
     Amber,
@@ -118,8 +118,8 @@ impl Emitter {
 /// Red, green and blue are the sRGB primaries with the luminances of the sRGB matrix the
 /// colour conversions use (`emitter::colour::SRGB_TO_XYZ`), and white is its D65, so RGB
 /// at full is exactly the white the basis images were captured in; amber
-/// and lime sit on the spectral locus at about 590 nm and 565 nm with the luminance the
-/// DMX patch's linear-RGB approximation gives them. The others are rough: give a real
+/// and lime sit on the spectral locus at about 590 nm and 565 nm with the luminance of linear
+/// RGB (1, 0.45, 0) and (0.5, 1, 0). The others are rough: give a real
 /// fixture's values in `[[profile.emitter]]` where known.
 pub const DEFAULT_EMITTERS: &[(&str, [f64; 2], f64)] = &[
     ("red", [0.64, 0.33], 0.212_672_9),

@@ -232,4 +232,94 @@ mod tests {
             }
         }
     }
+
+    /// A seven-colour fixture: the named six without white, and cyan and indigo.
+    fn seven() -> ColourModel {
+        let file = crate::profile::ProfileFile {
+            name: "seven".into(),
+            channels: [
+                "intensity",
+                "red",
+                "green",
+                "blue",
+                "amber",
+                "lime",
+                "emitter:cyan",
+                "emitter:indigo",
+            ]
+            .map(String::from)
+            .to_vec(),
+            emitters: Vec::new(),
+        };
+        ColourModel::new(&Profile::from_file(&file).expect("parses"))
+    }
+
+    #[test]
+    fn white_previews_as_white_on_seven_colours_too() {
+        let m = seven();
+        assert_eq!(m.emitters(), 7);
+        let s = m.solve([1.0; 3]);
+        assert!(s.levels().iter().all(|l| (0.0..=1.0).contains(l)), "{s:?}");
+        for intensity in [0.25f32, 1.0] {
+            let got = m.multiplier(&Level {
+                intensity,
+                color: [1.0; 3],
+            });
+            assert!(got.iter().all(|v| (v - intensity).abs() < 1e-6), "{got:?}");
+        }
+    }
+
+    #[test]
+    fn a_saturated_colour_on_rgbw_previews_at_its_share_of_white() {
+        // By hand: the default white emitter is R + G + B at full, so white on rgbw (every
+        // emitter at full) is twice R + G + B; a pure red is the red emitter alone, half
+        // the red of white. A pure green likewise, and yellow (R + G) too.
+        let m = model("rgbw");
+        for (color, want) in [
+            ([1.0, 0.0, 0.0], [0.5, 0.0, 0.0]),
+            ([0.0, 1.0, 0.0], [0.0, 0.5, 0.0]),
+            ([1.0, 1.0, 0.0], [0.5, 0.5, 0.0]),
+        ] {
+            let got = m.multiplier(&Level {
+                intensity: 0.8,
+                color,
+            });
+            for k in 0..3 {
+                assert!((got[k] - 0.8 * want[k]).abs() < 1e-5, "{color:?}: {got:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn out_of_gamut_colours_preview_as_the_colour_reached() {
+        // An RGB fixture whose red is an orange (x 0.55, y 0.40): sRGB's red is beyond it,
+        // and the closest it comes is its own red emitter alone, at full.
+        let file = crate::profile::ProfileFile {
+            name: "orange-red".into(),
+            channels: ["red", "green", "blue"].map(String::from).to_vec(),
+            emitters: vec![crate::profile::EmitterFile {
+                name: "red".into(),
+                xy: Some([0.55, 0.40]),
+                flux: None,
+            }],
+        };
+        let profile = Profile::from_file(&file).expect("parses");
+        let m = ColourModel::new(&profile);
+        let s = m.solve([1.0, 0.0, 0.0]);
+        assert!(!s.in_gamut());
+        let red = profile.emitters_xyz()[0];
+        let got = m.multiplier(&Level {
+            intensity: 1.0,
+            color: [1.0, 0.0, 0.0],
+        });
+        // What the red emitter alone shows relative to white, computed here from its XYZ.
+        let want = m.relative(red);
+        assert!(want[1] > 0.1, "the orange has green in it: {want:?}");
+        for k in 0..3 {
+            assert!(
+                (f64::from(got[k]) - want[k]).abs() < 1e-4,
+                "{got:?} vs {want:?}"
+            );
+        }
+    }
 }
