@@ -32,12 +32,33 @@ impl ColourModel {
     pub fn new(profile: &Profile) -> ColourModel {
         let mut emitters = profile.emitters_xyz();
         emitters.truncate(MAX_EMITTERS);
-        let white = if emitters.is_empty() {
-            [1.0; 3]
-        } else {
-            solve(&emitters, D65).reached_linear_srgb()
+        let mut model = ColourModel {
+            emitters,
+            white: [1.0; 3],
         };
-        ColourModel { emitters, white }
+        if !model.emitters.is_empty() {
+            model.white = model.most_light(D65).reached_linear_srgb();
+        }
+        model
+    }
+
+    /// [`solve`] for `target`, with a level within [`FULL`] of 1 taken as 1: emitter data
+    /// carry about seven digits (the sRGB primaries' luminances), so white on `rgb` would
+    /// otherwise ask one emitter for 0.9999995, a byte less at half intensity.
+    fn most_light(&self, target: [f64; 3]) -> Solution {
+        let mut s = solve(&self.emitters, target);
+        if s.levels[..s.len]
+            .iter()
+            .any(|l| (1.0 - l).abs() < FULL && *l != 1.0)
+        {
+            for l in &mut s.levels[..s.len] {
+                if (1.0 - *l).abs() < FULL {
+                    *l = 1.0;
+                }
+            }
+            s.reached = self.reached(s.levels());
+        }
+        s
     }
 
     /// A light without additive emitters: its colour is the plain linear multiplier (the
@@ -60,7 +81,7 @@ impl ColourModel {
     pub fn solve(&self, color: [f32; 3]) -> Solution {
         let linear = color.map(|c| f64::from(srgb_to_linear(unit(c))));
         let brightness = linear.iter().copied().fold(0.0, f64::max);
-        solve(&self.emitters, linear_srgb_to_xyz(linear)).at(brightness)
+        self.most_light(linear_srgb_to_xyz(linear)).at(brightness)
     }
 
     /// The linear RGB multiplier `level` applies to the light's basis image: the reached
@@ -128,6 +149,9 @@ impl ColourModel {
     }
 }
 
+/// How close to 1 a solved level is taken as full (far below a 16-bit DMX step, 1.5e-5).
+const FULL: f64 = 1e-6;
+
 /// `v` clamped to 0..1, NaN as 0.
 fn unit(v: f32) -> f32 {
     if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) }
@@ -185,6 +209,14 @@ mod tests {
                     assert!((v - intensity).abs() <= 1e-6, "{name}: {got:?}");
                 }
             }
+        }
+    }
+
+    #[test]
+    fn white_is_every_emitter_exactly_full_where_they_add_up_to_white() {
+        for name in ["rgb", "irgb", "rgbw", "irgbw"] {
+            let s = model(name).solve([1.0; 3]);
+            assert!(s.levels().iter().all(|&l| l == 1.0), "{name}: {s:?}");
         }
     }
 
