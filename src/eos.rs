@@ -115,8 +115,9 @@ fn parameter(slot: Slot) -> Option<&'static str> {
         Slot::Cyan => "Cyan",
         Slot::Magenta => "Magenta",
         Slot::Yellow => "Yellow",
-        // An extra emitter (`emitter:NAME`) is held at 0 on DMX until the colour solve
-        // drives it (docs/scene.md); its Eos parameter name comes with that.
+        // An extra emitter (`emitter:NAME`) carries the colour solve's level on DMX, but
+        // which Eos parameter it is (Indigo, Cyan, Deep Red...) is not mapped yet: it is
+        // left out of the export (docs/eos.md).
         Slot::Intensity | Slot::Intensity16 | Slot::Uv | Slot::Fixed(_) | Slot::Emitter(_) => {
             return None;
         }

@@ -1020,7 +1020,8 @@ impl Drop for Wire {
 pub struct Decoded {
     /// The dimmer slot (profiles with one).
     pub intensity: Option<f32>,
-    /// The linear colour multiplier the emitters say (`rgbw`: white added back to each);
+    /// The linear light the emitters make (`rgbw`: the white emitter, R + G + B, added
+    /// back to each);
     /// for profiles with a dimmer, the colour at full.
     pub emitters: [f32; 3],
 }
@@ -1067,8 +1068,24 @@ pub fn look_mismatch(look: &[Light], dmx: &BTreeMap<u16, Vec<u8>>) -> Option<Str
             "dimmer" => (Some(l.intensity), [1.0; 3], STEP),
             "irgb" => (Some(l.intensity), lin, STEP),
             "rgb" => (None, lin.map(|c| c * l.intensity), STEP),
+            // rgbw: the default white emitter is R + G + B at full (D65 at Y = 1), so the
+            // colour at its most light is k times it, k the largest with every emitter
+            // within 0..1: W takes what R, G and B share, and at most doubles the light.
             // Each emitter plus the white slot: two roundings.
-            _ => (None, lin.map(|c| c * l.intensity), 2.0 * STEP),
+            _ => {
+                let peak = lin.iter().copied().fold(0.0f32, f32::max);
+                let share = if peak > 0.0 {
+                    lin.iter().copied().fold(f32::MAX, f32::min) / peak
+                } else {
+                    0.0
+                };
+                let k = if share >= 0.5 {
+                    2.0
+                } else {
+                    1.0 / (1.0 - share)
+                };
+                (None, lin.map(|c| c * k * l.intensity), 2.0 * STEP)
+            }
         };
         let i_ok = match (d.intensity, want_i) {
             (Some(a), Some(b)) => (a - b).abs() <= STEP,

@@ -25,6 +25,7 @@ use visobjd_camera::{Camera, Shutter};
 use visobjd_dmx::{Output, Patch};
 use visobjd_hdr::{BracketSettings, ExposureFit, MergeSettings, Radiance, Response};
 use visobjd_scene::Scene;
+use visobjd_scene::emitter::ColourModel;
 use visobjd_scene::look::{Level, Look};
 
 /// What the camera is asked to write.
@@ -627,7 +628,7 @@ impl Session<'_> {
                     "the basis images differ in size: capture them again together".into(),
                 ));
             }
-            let m = lv.multiplier();
+            let m = ColourModel::new(self.scene.profile(l)).multiplier(lv);
             for (o, p) in c.pixels.iter_mut().zip(&img.pixels) {
                 for k in 0..3 {
                     o[k] += m[k] * p[k];

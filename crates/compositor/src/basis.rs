@@ -8,6 +8,7 @@ use rayon::prelude::*;
 
 use crate::render::STRIP;
 
+use visobjd_scene::emitter::ColourModel;
 use visobjd_scene::{Scene, SceneError};
 
 /// How basis samples are stored.
@@ -42,6 +43,10 @@ pub struct BasisImages {
     pub height: usize,
     /// Number of lights.
     pub lights: usize,
+    /// Per light, how a look's level becomes the multiplier of its image (each image is
+    /// its light at white through its profile): from the scene at [`load`], plain linear
+    /// colour for images made by [`BasisImages::from_planes`].
+    pub colours: Vec<ColourModel>,
     samples: Samples,
 }
 
@@ -94,6 +99,7 @@ impl BasisImages {
             width,
             height,
             lights,
+            colours: vec![ColourModel::plain(); lights],
             samples: match precision {
                 Precision::Half => Samples::Half(in_huge_pages(n, f16::ZERO)),
                 Precision::Single => Samples::Single(in_huge_pages(n, 0.0)),
@@ -438,6 +444,12 @@ pub fn load(scene: &Scene, widths: &[(usize, Precision)]) -> Result<Vec<BasisIma
             .map(|&(w, _)| (w, Precision::Single))
             .collect();
         return load(scene, &single);
+    }
+    let colours: Vec<ColourModel> = (0..lights)
+        .map(|l| ColourModel::new(scene.profile(l)))
+        .collect();
+    for img in &mut images {
+        img.colours.clone_from(&colours);
     }
     Ok(images)
 }

@@ -18,6 +18,7 @@ use rayon::prelude::*;
 use crate::basis::{BasisImages, Panel};
 use crate::color::encode_srgb8_planar;
 use crate::cpu::{Avx2Fma, Avx512F, NonTemporal, non_temporal};
+use visobjd_scene::emitter::ColourModel;
 use visobjd_scene::look::Look;
 
 /// Pixels per strip: six 16-lane AVX-512 vectors, the width of the register block.
@@ -60,14 +61,17 @@ pub fn exposure_gain(stops: f32) -> f32 {
     stops.exp2()
 }
 
-/// Per-light linear RGB multipliers of each look, times `gain`: `weights[c][l]`.
-pub fn weights(looks: &[&Look], gain: f32) -> Vec<Vec<[f32; 3]>> {
+/// Per-light linear RGB multipliers of each look, times `gain`: `weights[c][l]`, each
+/// light's through its colour model (`colours[l]`, [`BasisImages::colours`]), computed
+/// once per look so the kernels only multiply and add.
+pub fn weights(colours: &[ColourModel], looks: &[&Look], gain: f32) -> Vec<Vec<[f32; 3]>> {
     looks
-        .iter()
+        .par_iter()
         .map(|look| {
             look.levels
                 .iter()
-                .map(|lv| lv.multiplier().map(|m| m * gain))
+                .zip(colours)
+                .map(|(lv, colour)| colour.multiplier(lv).map(|m| m * gain))
                 .collect()
         })
         .collect()
@@ -939,7 +943,7 @@ pub fn zeroed_outputs<O: Default + Clone + Send>(n: usize, len: usize) -> Vec<Ve
 
 /// Renders looks to 8-bit sRGB images.
 pub fn render_srgb8(basis: &BasisImages, looks: &[&Look], gain: f32) -> Vec<image::RgbImage> {
-    let w = weights(looks, gain);
+    let w = weights(&basis.colours, looks, gain);
     let mut outs = zeroed_outputs(looks.len(), basis.pixels() * 3);
     composite_srgb8(Kernel::detect(), basis, &w, &mut outs);
     outs.into_iter()
@@ -954,8 +958,8 @@ pub fn render_srgb8(basis: &BasisImages, looks: &[&Look], gain: f32) -> Vec<imag
 /// are tested against it.
 pub fn render_reference(basis: &BasisImages, look: &Look, gain: f32) -> Vec<f32> {
     let mut out = vec![0.0f32; basis.pixels() * 3];
-    for (l, lv) in look.levels.iter().enumerate() {
-        let m = lv.multiplier();
+    for (l, (lv, colour)) in look.levels.iter().zip(&basis.colours).enumerate() {
+        let m = colour.multiplier(lv);
         for ch in 0..3 {
             for (p, &v) in basis.plane(ch, l).iter().enumerate() {
                 out[p * 3 + ch] += gain * m[ch] * v;
@@ -1012,7 +1016,7 @@ mod tests {
         let basis = BasisImages::from_planes(w, h, lights, &planes, precision);
         let looks = looks(lights);
         let refs: Vec<&Look> = looks.iter().collect();
-        let wts = weights(&refs, 0.7);
+        let wts = weights(&basis.colours, &refs, 0.7);
         let mut raw: Vec<Vec<f32>> = looks.iter().map(|_| vec![0.0; w * h * 3]).collect();
         composite_chunked(kernel, &basis, &wts, &mut raw, chunk, |rgb, out| {
             for (i, px) in out.chunks_exact_mut(3).enumerate() {
@@ -1064,7 +1068,7 @@ mod tests {
         for precision in [Precision::Single, Precision::Half] {
             let basis = BasisImages::from_planes(w, h, lights, &planes, precision);
             for gain in [0.004, 0.05, 0.7] {
-                let wts = weights(&refs, gain);
+                let wts = weights(&basis.colours, &refs, gain);
                 for chunk in [CHUNK_LIGHTS, 3] {
                     let mut want = zeroed_outputs(looks.len(), w * h * 3);
                     composite_chunked(kernel, &basis, &wts, &mut want, chunk, encode_srgb8_planar);

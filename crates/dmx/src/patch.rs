@@ -5,20 +5,13 @@
 //! byte that jumps and a fine byte that saws.
 
 use visobjd_scene::Scene;
+use visobjd_scene::emitter::ColourModel;
 use visobjd_scene::look::{Level, Look};
 use visobjd_scene::profile::Slot;
 use visobjd_scene::srgb::linear_to_srgb;
 
 /// Slots in a DMX universe.
 pub const SLOTS: usize = 512;
-
-/// Approximate linear-sRGB colour of an amber emitter (~590 nm) at full. Amber is
-/// extracted from the wanted colour as the largest multiple of this that fits under it.
-pub const AMBER: [f32; 3] = [1.0, 0.45, 0.0];
-
-/// Approximate linear-sRGB colour of a lime emitter (~565 nm, phosphor yellow-green) at
-/// full, extracted like [`AMBER`].
-pub const LIME: [f32; 3] = [0.5, 1.0, 0.0];
 
 /// How the grand master acts on one slot's level. Every rule is affine in the level, so
 /// mastering commutes with a crossfade: a fade can run on unmastered levels while the
@@ -42,6 +35,8 @@ struct Placed {
     offset: usize,
     slots: Vec<Slot>,
     has_intensity: bool,
+    /// How the light's additive emitters mix a colour.
+    colour: ColourModel,
 }
 
 /// The scene's DMX patch: which universes exist and where every light's slots are.
@@ -86,20 +81,6 @@ impl Frame {
 /// `v` clamped to 0..1, with NaN as 0, so no outside value can reach the wire as garbage.
 fn unit(v: f32) -> f32 {
     if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) }
-}
-
-/// Takes the largest multiple `k` (0..1) of `emitter` that fits under `c`, subtracts it,
-/// and returns `k`.
-fn extract(c: &mut [f32; 3], emitter: [f32; 3]) -> f32 {
-    let k = (0..3)
-        .filter(|&i| emitter[i] > 0.0)
-        .map(|i| c[i] / emitter[i])
-        .fold(1.0f32, f32::min)
-        .max(0.0);
-    for (v, e) in c.iter_mut().zip(emitter) {
-        *v = (*v - k * e).max(0.0);
-    }
-    k
 }
 
 impl Patch {
@@ -147,6 +128,7 @@ impl Patch {
                 offset,
                 slots: profile.slots.clone(),
                 has_intensity,
+                colour: ColourModel::new(profile),
             });
         }
         Patch {
@@ -177,67 +159,42 @@ impl Patch {
     /// The slot levels of `look` at master 1. Fades run on these so the master can move
     /// at once, independently of a fade in progress ([`Patch::mastered`] applies it).
     ///
-    /// Per light: `intensity` slots get the intensity; with a dimmer the emitters get the
-    /// linear colour at full (the compositor's [`Level::multiplier`] at intensity 1),
-    /// without one the intensity is folded in (the whole multiplier). `white` takes
-    /// min(r, g, b) out of the emitters, then `amber` and `lime` take the largest multiple
-    /// of [`AMBER`] and [`LIME`] that fits; `cyan`/`magenta`/`yellow` are 1 - r/g/b of the
-    /// colour before extraction; `uv` is 0 and `fixed:N` is N. A light missing from the
-    /// look is off.
+    /// Per light: `intensity` slots get the intensity; the additive emitters (red, green,
+    /// blue, white, amber, lime, `emitter:NAME`) get the light's [`ColourModel::solve`] of
+    /// the colour, with a dimmer as they are, without one at the intensity
+    /// (`Solution::at`); `cyan`/`magenta`/`yellow` are 1 - r/g/b of the linear colour (the
+    /// intensity folded in without a dimmer); `uv` is 0 and `fixed:N` is N. A light missing
+    /// from the look is off.
     pub fn unmastered(&self, look: &Look) -> Frame {
         let mut frame = self.blackout();
         for (i, light) in self.lights.iter().enumerate() {
             let level = look.levels.get(i).copied().unwrap_or(Level::OFF);
             let intensity = unit(level.intensity);
-            let full = Level {
-                intensity: 1.0,
-                ..level
+            let color = level.color.map(unit);
+            let fold = if light.has_intensity { 1.0 } else { intensity };
+            let solution = light.colour.solve(color).at(f64::from(fold));
+            let emitters = solution.levels();
+            let flags = Level {
+                intensity: fold,
+                color,
             }
             .multiplier()
             .map(unit);
-            let folded = if light.has_intensity {
-                full
-            } else {
-                full.map(|v| v * intensity)
-            };
-            let mut c = folded;
-            let has = |s: Slot| light.slots.contains(&s);
-            let white = if has(Slot::White) {
-                let w = c[0].min(c[1]).min(c[2]);
-                c = c.map(|v| v - w);
-                w
-            } else {
-                0.0
-            };
-            let amber = if has(Slot::Amber) {
-                extract(&mut c, AMBER)
-            } else {
-                0.0
-            };
-            let lime = if has(Slot::Lime) {
-                extract(&mut c, LIME)
-            } else {
-                0.0
-            };
             let base = light.universe * SLOTS;
-            let mut at = light.offset;
+            let (mut at, mut emitter) = (light.offset, 0);
             for &slot in &light.slots {
-                let v = match slot {
-                    Slot::Intensity | Slot::Intensity16 => intensity,
-                    Slot::Red => c[0],
-                    Slot::Green => c[1],
-                    Slot::Blue => c[2],
-                    Slot::White => white,
-                    Slot::Amber => amber,
-                    Slot::Lime => lime,
-                    // An emitter beyond the six named ones stays dark until the colour
-                    // solver (which mixes with `Profile::emitters_xyz`) sets its level.
-                    Slot::Emitter(_) => 0.0,
-                    Slot::Uv => 0.0,
-                    Slot::Cyan => 1.0 - folded[0],
-                    Slot::Magenta => 1.0 - folded[1],
-                    Slot::Yellow => 1.0 - folded[2],
-                    Slot::Fixed(n) => f32::from(n) / 255.0,
+                let v = if slot.is_emitter() {
+                    emitter += 1;
+                    emitters.get(emitter - 1).map_or(0.0, |&v| v as f32)
+                } else {
+                    match slot {
+                        Slot::Intensity | Slot::Intensity16 => intensity,
+                        Slot::Cyan => 1.0 - flags[0],
+                        Slot::Magenta => 1.0 - flags[1],
+                        Slot::Yellow => 1.0 - flags[2],
+                        Slot::Fixed(n) => f32::from(n) / 255.0,
+                        _ => 0.0,
+                    }
                 };
                 if at < SLOTS {
                     frame.levels[base + at] = unit(v);
@@ -329,42 +286,57 @@ impl Patch {
 impl Patch {
     /// What the DMX in `bytes` (one 512-slot buffer per universe, in
     /// [`Patch::universes`] order) asks of each light: the linear RGB multiplier of its
-    /// basis image, the inverse of [`Patch::unmastered`] then [`Patch::quantise`] at
-    /// master 1: what a simulated camera renders the rig with.
+    /// basis image (the light the emitters make relative to the light's white, times the
+    /// dimmer), the inverse of [`Patch::unmastered`] then [`Patch::quantise`] at master 1:
+    /// what a simulated camera renders the rig with.
     pub fn multipliers(&self, bytes: &[[u8; SLOTS]]) -> Vec<[f32; 3]> {
         self.lights
             .iter()
-            .map(|light| match read(light, bytes) {
-                (Some(intensity), full) => full.map(|v| v * intensity),
-                (None, full) => full,
+            .map(|light| {
+                let (dimmer, colour) = read(light, bytes);
+                let full = match colour {
+                    Read::Emitters(levels) => light
+                        .colour
+                        .relative(light.colour.reached(&levels))
+                        .map(|v| v as f32),
+                    Read::Linear(c) => c,
+                };
+                full.map(|v| v * dimmer.unwrap_or(1.0))
             })
             .collect()
     }
-}
 
-impl Patch {
     /// The look the DMX in `bytes` (one 512-slot buffer per universe, in
     /// [`Patch::universes`] order) shows: the inverse of [`Patch::unmastered`] then
-    /// [`Patch::quantise`], so a console's output can become a visobjd look. A light with a
-    /// dimmer: intensity is the dimmer, colour its emitters at full. Without one: intensity
-    /// is its largest emitter level and colour the emitters divided by it (white when
-    /// dark). A light without colour slots is white. Colours are sRGB, as looks keep them.
+    /// [`Patch::quantise`], so a console's output can become a visobjd look. The emitters
+    /// read back through [`ColourModel::read`] as a colour and its brightness. A light with a
+    /// dimmer: intensity is the dimmer, colour the emitters' colour at their brightness.
+    /// Without one: intensity is the brightness and colour the emitters' colour (white
+    /// when dark). CMY flags read as `1 - level`; a light without colour slots is white.
+    /// Colours are sRGB, as looks keep them.
     pub fn look(&self, bytes: &[[u8; SLOTS]]) -> Look {
         let levels = self
             .lights
             .iter()
             .map(|light| {
-                let (dimmer, full) = read(light, bytes);
-                let (intensity, linear) = match dimmer {
-                    Some(d) => (d, full),
-                    None => {
-                        let peak = full.iter().copied().fold(0.0f32, f32::max);
+                let (dimmer, colour) = read(light, bytes);
+                let (brightness, linear) = match colour {
+                    Read::Emitters(levels) => {
+                        let (t, c) = light.colour.read(&levels);
+                        (t as f32, c.map(|v| v as f32))
+                    }
+                    Read::Linear(c) => {
+                        let peak = c.iter().copied().fold(0.0f32, f32::max);
                         if peak > 0.0 {
-                            (peak, full.map(|v| v / peak))
+                            (peak, c.map(|v| v / peak))
                         } else {
                             (0.0, [1.0; 3])
                         }
                     }
+                };
+                let (intensity, linear) = match dimmer {
+                    Some(d) => (d, linear.map(|v| v * brightness)),
+                    None => (brightness, linear),
                 };
                 Level {
                     intensity: unit(intensity),
@@ -376,14 +348,22 @@ impl Patch {
     }
 }
 
-/// One light's DMX read back: its dimmer level if it has one, and its emitters summed to
-/// one linear colour (white as equal parts, amber and lime as [`AMBER`] and [`LIME`], CMY
-/// flags as `1 - level`, white where the light has no colour slots). A missing universe
-/// reads as zeros.
-fn read(light: &Placed, bytes: &[[u8; SLOTS]]) -> (Option<f32>, [f32; 3]) {
+/// A light's colour slots read back.
+enum Read {
+    /// Its additive emitters' levels, in slot order.
+    Emitters(Vec<f64>),
+    /// A linear colour: the CMY flags as `1 - level`, or white without colour slots.
+    Linear([f32; 3]),
+}
+
+/// One light's DMX read back: its dimmer level if it has one, and its colour slots. A
+/// missing universe reads as zeros.
+fn read(light: &Placed, bytes: &[[u8; SLOTS]]) -> (Option<f32>, Read) {
     let dmx = bytes.get(light.universe);
     let byte = |i: usize| dmx.and_then(|d| d.get(i)).copied().map_or(0.0, f32::from);
-    let (mut dimmer, mut emitters, mut flags) = (None, None::<[f32; 3]>, None::<[f32; 3]>);
+    let mut dimmer = None;
+    let mut emitters = Vec::with_capacity(light.colour.emitters());
+    let mut flags = None::<[f32; 3]>;
     let mut at = light.offset;
     for &slot in &light.slots {
         let v = if slot == Slot::Intensity16 {
@@ -391,40 +371,22 @@ fn read(light: &Placed, bytes: &[[u8; SLOTS]]) -> (Option<f32>, [f32; 3]) {
         } else {
             byte(at) / 255.0
         };
-        let emitter = match slot {
-            Slot::Red => Some([1.0, 0.0, 0.0]),
-            Slot::Green => Some([0.0, 1.0, 0.0]),
-            Slot::Blue => Some([0.0, 0.0, 1.0]),
-            Slot::White => Some([1.0; 3]),
-            Slot::Amber => Some(AMBER),
-            Slot::Lime => Some(LIME),
-            _ => None,
-        };
-        if let Some(e) = emitter {
-            let sum = emitters.get_or_insert([0.0; 3]);
-            for k in 0..3 {
-                sum[k] += v * e[k];
-            }
-        }
-        let flag = match slot {
-            Slot::Cyan => Some(0),
-            Slot::Magenta => Some(1),
-            Slot::Yellow => Some(2),
-            _ => None,
-        };
-        if let Some(k) = flag {
-            flags.get_or_insert([1.0; 3])[k] = 1.0 - v;
-        }
-        if matches!(slot, Slot::Intensity | Slot::Intensity16) {
-            dimmer = Some(v);
+        match slot {
+            s if s.is_emitter() => emitters.push(f64::from(v)),
+            Slot::Cyan => flags.get_or_insert([1.0; 3])[0] = 1.0 - v,
+            Slot::Magenta => flags.get_or_insert([1.0; 3])[1] = 1.0 - v,
+            Slot::Yellow => flags.get_or_insert([1.0; 3])[2] = 1.0 - v,
+            Slot::Intensity | Slot::Intensity16 => dimmer = Some(v),
+            _ => {}
         }
         at += slot.width();
     }
-    let full = emitters
-        .map(|c| c.map(|v| v.min(1.0)))
-        .or(flags)
-        .unwrap_or([1.0; 3]);
-    (dimmer.filter(|_| light.has_intensity), full)
+    let colour = if emitters.is_empty() {
+        Read::Linear(flags.unwrap_or([1.0; 3]))
+    } else {
+        Read::Emitters(emitters)
+    };
+    (dimmer.filter(|_| light.has_intensity), colour)
 }
 
 #[cfg(test)]
@@ -438,8 +400,9 @@ mod tests {
         let mut text = String::from(
             "[[profile]]\nname = \"custom\"\nchannels = [\"fixed:255\", \"intensity16\", \"cyan\", \"magenta\", \"yellow\", \"uv\", \"fixed:7\"]\n",
         );
+        text += "[[profile]]\nname = \"seven\"\nchannels = [\"red\", \"green\", \"blue\", \"amber\", \"lime\", \"emitter:cyan\", \"emitter:indigo\"]\n";
         let profiles = [
-            "dimmer", "dimmer16", "rgb", "irgb", "rgbw", "irgbw", "rgba", "custom",
+            "dimmer", "dimmer16", "rgb", "irgb", "rgbw", "irgbw", "rgba", "custom", "seven",
         ];
         for (i, p) in profiles.iter().enumerate() {
             text += &format!(
@@ -474,7 +437,7 @@ mod tests {
         assert_eq!(bytes[1][511], 255);
         assert!(bytes[1][..511].iter().all(|&b| b == 0));
         assert_eq!(bytes[0][1..10], [0; 9]);
-        assert!(bytes[0][80..].iter().all(|&b| b == 0));
+        assert!(bytes[0][90..].iter().all(|&b| b == 0));
     }
 
     #[test]
@@ -491,25 +454,95 @@ mod tests {
             [128, 255, 55, 0],
             "irgb: colour at full"
         );
-        // rgba: amber (1, 0.45, 0) takes 0.21404 / 0.45 = 0.4757 of red and all green.
-        let full = patch.quantise(&patch.levels(&look(&scene, 1.0, [1.0, 0.5, 0.0]), 1.0));
-        assert_eq!(bytes_of(&full, 6, 4), [134, 0, 0, 121], "rgba");
     }
 
     #[test]
-    fn white_extraction() {
+    fn white_emitter_takes_the_common_part_at_the_most_light() {
         let scene = scene();
         let patch = Patch::new(&scene);
-        // linear (1, 1, 0.214): white takes 0.214 from each emitter.
-        let b = patch.quantise(&patch.levels(&look(&scene, 0.5, [1.0, 1.0, 0.5]), 1.0));
-        assert_eq!(
-            bytes_of(&b, 4, 4),
-            [100, 100, 0, 27],
-            "rgbw, intensity folded"
-        );
-        assert_eq!(bytes_of(&b, 5, 5), [128, 200, 200, 0, 55], "irgbw");
+        // By hand: with the default emitters, linear R, G and B at full add up to the
+        // white emitter's D65 at Y = 1, so in linear sRGB units W = R + G + B. Linear
+        // (1, 1, w) with w = 0.21404 (sRGB 0.5) at the most light: R = G = 1, B = 0 and
+        // W = w / (1 - w) = 0.27233 (each channel is 1 + W, blue is W, in the ratio asked).
+        let w = 0.214_041_14f64;
+        let white = w / (1.0 - w);
+        let b = patch.quantise(&patch.levels(&look(&scene, 0.6, [1.0, 1.0, 0.5]), 1.0));
+        let byte = |v: f64| (v * 255.0).round() as u8;
+        let want_rgbw = [byte(0.6), byte(0.6), 0, byte(0.6 * white)];
+        let want_irgbw = [153, 255, 255, 0, byte(white)];
+        for (got, want) in [
+            (bytes_of(&b, 4, 4), want_rgbw.to_vec()),
+            (bytes_of(&b, 5, 5), want_irgbw.to_vec()),
+        ] {
+            for (g, w) in got.iter().zip(&want) {
+                assert!(g.abs_diff(*w) <= 1, "{got:?} vs {want:?}");
+            }
+        }
+        // White is every emitter at full: twice the light of R, G and B alone.
         let white = patch.quantise(&patch.levels(&look(&scene, 1.0, [1.0; 3]), 1.0));
-        assert_eq!(bytes_of(&white, 4, 4), [0, 0, 0, 255]);
+        assert_eq!(bytes_of(&white, 4, 4), [255, 255, 255, 255]);
+        assert_eq!(bytes_of(&white, 5, 5), [255, 255, 255, 255, 255]);
+    }
+
+    /// The emitter levels the colour solve gives the light at profile index `i` for the
+    /// sRGB `color` at its most light, straight from `emitter::solve`.
+    fn solved(scene: &Scene, i: usize, color: [f32; 3]) -> Vec<f64> {
+        let linear = color.map(|c| f64::from(visobjd_scene::srgb::srgb_to_linear(c)));
+        let peak = linear.iter().copied().fold(0.0, f64::max);
+        let target = visobjd_scene::emitter::colour::linear_srgb_to_xyz(linear);
+        visobjd_scene::emitter::solve(&scene.profile(i).emitters_xyz(), target)
+            .at(peak)
+            .levels()
+            .to_vec()
+    }
+
+    #[test]
+    fn emitters_send_the_solves_levels() {
+        let scene = scene();
+        let patch = Patch::new(&scene);
+        for color in [[1.0, 0.5, 0.0], [0.2, 0.4, 1.0], [1.0; 3], [0.0, 1.0, 0.9]] {
+            for intensity in [1.0, 0.6] {
+                let b = patch.quantise(&patch.levels(&look(&scene, intensity, color), 1.0));
+                let again = patch.quantise(&patch.levels(&look(&scene, intensity, color), 1.0));
+                assert_eq!(b, again, "the same bytes every time");
+                // rgbw, rgba and the seven-colour light have no dimmer: the intensity is
+                // folded in; irgbw has one.
+                for (i, width, dimmer) in
+                    [(4, 4, false), (5, 5, true), (6, 4, false), (8, 7, false)]
+                {
+                    let want: Vec<u8> = solved(&scene, i, color)
+                        .iter()
+                        .map(|l| {
+                            assert!((0.0..=1.0).contains(l), "{l}");
+                            let fold = if dimmer { 1.0 } else { f64::from(intensity) };
+                            (l * fold * 255.0).round() as u8
+                        })
+                        .collect();
+                    let got = bytes_of(&b, i, width);
+                    let got = if dimmer { &got[1..] } else { &got[..] };
+                    assert_eq!(got.len(), want.len());
+                    for (g, w) in got.iter().zip(&want) {
+                        assert!(
+                            g.abs_diff(*w) <= 1,
+                            "light {i} {color:?} at {intensity}: {got:?} vs {want:?}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn extra_emitters_carry_light() {
+        let scene = scene();
+        let patch = Patch::new(&scene);
+        // White on the seven-colour light needs every emitter, cyan and indigo too.
+        let b = patch.quantise(&patch.levels(&look(&scene, 1.0, [1.0; 3]), 1.0));
+        let seven = bytes_of(&b, 8, 7);
+        assert!(seven[5] > 0 && seven[6] > 0, "{seven:?}");
+        // A cyan beyond what green and blue make reaches for the cyan emitter.
+        let b = patch.quantise(&patch.levels(&look(&scene, 1.0, [0.0, 1.0, 1.0]), 1.0));
+        assert!(bytes_of(&b, 8, 7)[5] > 0, "{:?}", bytes_of(&b, 8, 7));
     }
 
     #[test]
@@ -619,7 +652,7 @@ mod tests {
                 let step = 1.0 / 255.0 + 1e-4;
                 if profile.has_colour() {
                     // The multiplier each emitter carries, to a DMX step per emitter.
-                    let want = s.multiplier();
+                    let want = ColourModel::new(profile).multiplier(s);
                     for k in 0..3 {
                         assert!(
                             (m[k] - want[k]).abs() <= 3.0 * step,
@@ -736,12 +769,17 @@ mod tests {
             "sRGB 0.5 is linear 0.214: {:?}",
             l[2]
         );
-        assert_eq!((l[3].intensity, l[3].color), (0.2, [1.0, 0.0, 0.0]));
+        assert_eq!(l[3].intensity, 0.2);
+        assert!(
+            (l[3].color[0] - 1.0).abs() < 1e-6 && l[3].color[1..].iter().all(|v| v.abs() < 1e-6),
+            "{:?}",
+            l[3]
+        );
         assert_eq!(
             (l[4].intensity, l[4].color),
             (0.0, [1.0; 3]),
             "dark rgbw is white at 0"
         );
-        assert_eq!(l[8].intensity, 0.0, "universe 3 is missing: dark");
+        assert_eq!(l[9].intensity, 0.0, "universe 3 is missing: dark");
     }
 }

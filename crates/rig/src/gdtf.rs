@@ -467,23 +467,24 @@ mod tests {
 
     #[test]
     fn undescribed_emitters_take_the_scale_of_the_described_ones() {
-        // Red and green described at 10x their default flux: blue follows at 10x.
+        // Red and green described at 10x their default flux: blue follows at 10x (the
+        // defaults are the sRGB matrix's luminances, 0.2126729, 0.7151522, 0.072175).
         let mut given = vec![
             EmitterFile {
                 name: "red".into(),
                 xy: Some([0.7, 0.3]),
-                flux: Some(2.126),
+                flux: Some(2.126_729),
             },
             EmitterFile {
                 name: "green".into(),
                 xy: Some([0.2, 0.7]),
-                flux: Some(7.152),
+                flux: Some(7.151_522),
             },
         ];
         scale_defaults(&["red", "green", "blue", "teal"], &mut given);
         assert_eq!(given.len(), 3, "teal has no default to scale");
         assert_eq!(given[2].name, "blue");
-        assert!((given[2].flux.expect("flux") - 0.722).abs() < 1e-9);
+        assert!((given[2].flux.expect("flux") - 0.721_75).abs() < 1e-9);
         assert_eq!(given[2].xy, None);
         // Nothing described: the defaults stay as they are.
         let mut none = Vec::new();

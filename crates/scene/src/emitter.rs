@@ -11,6 +11,9 @@
 //! allocation, no randomness, the same bits on every run.
 
 pub mod colour;
+pub mod model;
+
+pub use model::ColourModel;
 
 use colour::{xyz_to_linear_srgb, xyz_to_uv};
 
@@ -20,6 +23,11 @@ pub const MAX_EMITTERS: usize = 16;
 
 /// Within this distance (u'v') of the emitters' gamut a chromaticity counts as inside.
 const INSIDE: f64 = 1e-12;
+/// A chromaticity inside the gamut but within this distance (u'v', far below any visible
+/// difference) of its edge is put on the edge, and one this close to an emitter's on that
+/// emitter's: so near, the most-light programme's dual optimum lies near infinity, where
+/// rounding cancels it to nonsense (a red with a 1e-8 trace of blue solved to black).
+const EDGE: f64 = 1e-7;
 /// Two chromaticity directions whose sine is below this are parallel.
 const PARALLEL: f64 = 1e-9;
 /// An emitter whose chromaticity is within this (relative) of the target's has it.
@@ -112,6 +120,12 @@ pub fn solve(emitters: &[[f64; 3]], target: [f64; 3]) -> Solution {
         return solution;
     };
     let (c, shift) = nearest_in_gamut(&uv[..n], wanted);
+    // A hair from an emitter's own chromaticity is that emitter's (see [`EDGE`]).
+    let c = uv[..n]
+        .iter()
+        .copied()
+        .find(|p| norm(sub(c, *p)) < EDGE)
+        .unwrap_or(c);
     solution.shift = shift;
     // The chromaticity constraint Σ l_k g_k = 0, with g_k = (4X - u D, 9Y - v D) and
     // D = X + 15Y + 3Z: the mix's u' = Σ l 4X / Σ l D is u (and v' likewise).
@@ -159,7 +173,8 @@ fn sub(a: [f64; 2], b: [f64; 2]) -> [f64; 2] {
 }
 
 /// The nearest point to `c` (u'v') of the convex hull of `points`, and its distance: `c`
-/// itself and 0 when inside (within [`INSIDE`]).
+/// itself and 0 when inside (within [`INSIDE`]), put on the edge when within [`EDGE`] of
+/// it (still reported as no shift).
 fn nearest_in_gamut(points: &[[f64; 2]], c: [f64; 2]) -> ([f64; 2], f64) {
     let mut hull = [[0.0; 2]; 2 * MAX_EMITTERS];
     let h = convex_hull(points, &mut hull);
@@ -175,22 +190,21 @@ fn nearest_in_gamut(points: &[[f64; 2]], c: [f64; 2]) -> ([f64; 2], f64) {
         let q = [a[0] + t * ab[0], a[1] + t * ab[1]];
         (q, norm(sub(c, q)))
     };
-    if h >= 3 {
-        // Counter-clockwise: inside is left of (or on) every edge.
-        let inside = (0..h).all(|i| {
-            let (a, b) = (hull[i], hull[(i + 1) % h]);
-            cross(sub(b, a), sub(c, a)) >= -INSIDE * norm(sub(b, a))
-        });
-        if inside {
-            return (c, 0.0);
-        }
-    }
     let mut best = nearest_on(hull[0], hull[1 % h]);
     for i in 1..h {
         let candidate = nearest_on(hull[i], hull[(i + 1) % h]);
         if candidate.1 < best.1 {
             best = candidate;
         }
+    }
+    // Counter-clockwise: inside is left of (or on) every edge.
+    let inside = h >= 3
+        && (0..h).all(|i| {
+            let (a, b) = (hull[i], hull[(i + 1) % h]);
+            cross(sub(b, a), sub(c, a)) >= -INSIDE * norm(sub(b, a))
+        });
+    if inside {
+        return (if best.1 < EDGE { best.0 } else { c }, 0.0);
     }
     if best.1 <= INSIDE { (c, 0.0) } else { best }
 }

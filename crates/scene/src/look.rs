@@ -25,8 +25,10 @@ impl Level {
         color: [1.0, 1.0, 1.0],
     };
 
-    /// The linear RGB multiplier this level applies to the light's basis image. The
-    /// compositor and the DMX mapping both use it, so preview and stage agree.
+    /// The plain linear RGB multiplier of this level: the decoded colour times the
+    /// intensity. What a light without additive emitters (a dimmer, a CMY fixture) applies
+    /// to its basis image; a light with emitters goes through its
+    /// [`crate::emitter::ColourModel`], which equals this for the sRGB primaries.
     pub fn multiplier(&self) -> [f32; 3] {
         let c = self.color.map(srgb_to_linear);
         [

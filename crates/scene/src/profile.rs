@@ -24,7 +24,7 @@ pub enum Slot {
     Green,
     /// Additive emitter.
     Blue,
-    /// White emitter, extracted from the colour's common part.
+    /// White emitter.
     White,
     /// Amber emitter.
     Amber,
@@ -115,16 +115,17 @@ impl Emitter {
 
 /// Emitters whose colour is known without being told (docs/scene.md): the six named
 /// slots, and a few common LED colours an importer meets (OFL `Cyan`, `Indigo`, ...).
-/// Red, green and blue are the sRGB primaries with the luminances that add up to D65
-/// white at Y = 1, so RGB at full is the white the basis images were captured in; amber
-/// and lime sit on the spectral locus at about 590 nm and 565 nm with the luminance the
-/// DMX patch's linear-RGB approximation gives them. The others are rough: give a real
+/// Red, green and blue are the sRGB primaries with the luminances of the sRGB matrix the
+/// colour conversions use (`emitter::colour::SRGB_TO_XYZ`), and white is its D65, so RGB
+/// at full is exactly the white the basis images were captured in; amber
+/// and lime sit on the spectral locus at about 590 nm and 565 nm with the luminance of linear
+/// RGB (1, 0.45, 0) and (0.5, 1, 0). The others are rough: give a real
 /// fixture's values in `[[profile.emitter]]` where known.
 pub const DEFAULT_EMITTERS: &[(&str, [f64; 2], f64)] = &[
-    ("red", [0.64, 0.33], 0.2126),
-    ("green", [0.30, 0.60], 0.7152),
-    ("blue", [0.15, 0.06], 0.0722),
-    ("white", [0.3127, 0.3290], 1.0),
+    ("red", [0.64, 0.33], 0.212_672_9),
+    ("green", [0.30, 0.60], 0.715_152_2),
+    ("blue", [0.15, 0.06], 0.072_175),
+    ("white", [0.312_726_6, 0.329_023_1], 1.0),
     ("amber", [0.5752, 0.4242], 0.5344),
     ("lime", [0.4087, 0.5896], 0.8215),
     // ~495 nm.
@@ -400,10 +401,10 @@ mod tests {
         let p = Profile::built_in("rgb").expect("built in");
         let xyz = p.emitters_xyz();
         let sum: Vec<f64> = (0..3).map(|i| xyz.iter().map(|e| e[i]).sum()).collect();
-        // D65 at Y = 1: X = 0.3127 / 0.3290, Z = (1 - 0.3127 - 0.3290) / 0.3290.
-        assert!((sum[0] - 0.9505).abs() < 2e-3, "{sum:?}");
-        assert!((sum[1] - 1.0).abs() < 1e-9, "{sum:?}");
-        assert!((sum[2] - 1.0891).abs() < 2e-3, "{sum:?}");
+        // D65 at Y = 1 as IEC 61966-2-1's matrix (Lindbloom's table) has it.
+        assert!((sum[0] - 0.95047).abs() < 1e-6, "{sum:?}");
+        assert!((sum[1] - 1.0).abs() < 1e-6, "{sum:?}");
+        assert!((sum[2] - 1.08883).abs() < 1e-6, "{sum:?}");
     }
 
     #[test]
