@@ -214,6 +214,9 @@ impl Output {
             });
         }
 
+        let mut art_sockets: Vec<usize> = artnet.iter().map(|s| s.route.socket).collect();
+        art_sockets.sort_unstable();
+        art_sockets.dedup();
         let universes = patch.universes().to_vec();
         let counters = Arc::new(Counters {
             frames: universes.iter().map(|_| AtomicU64::new(0)).collect(),
@@ -261,6 +264,7 @@ impl Output {
             counters: counters.clone(),
             stop: stop.clone(),
             buf: Vec::with_capacity(700),
+            art_sockets,
             poll_due: now,
             discovery_due: now,
         };
@@ -608,6 +612,9 @@ struct Clock {
     counters: Arc<Counters>,
     stop: Arc<AtomicBool>,
     buf: Vec<u8>,
+    /// The sockets Art-Net destinations send from, each once: where polls and replies
+    /// arrive (fixed at start, so the clock never rebuilds the list).
+    art_sockets: Vec<usize>,
     /// When discovering Art-Net destinations poll next.
     poll_due: Instant,
     /// When E1.31 universe discovery goes out next.
@@ -747,11 +754,9 @@ impl Clock {
     /// Answers ArtPolls and records the nodes' ArtPollReplies, from every socket an
     /// Art-Net destination sends from.
     fn receive_artnet(&mut self, now: Instant) {
-        let mut sockets: Vec<usize> = self.artnet.iter().map(|s| s.route.socket).collect();
-        sockets.sort_unstable();
-        sockets.dedup();
         let mut packet = [0u8; 600];
-        for i in sockets {
+        for k in 0..self.art_sockets.len() {
+            let i = self.art_sockets[k];
             // A bounded drain: a flood cannot hold the clock.
             for _ in 0..64 {
                 let Ok((n, from)) = self.sockets[i].recv_from(&mut packet) else {
