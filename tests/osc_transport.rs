@@ -760,11 +760,7 @@ for mode in ("1.0", "1.1"):
 #[test]
 fn python_osc_talks_to_the_server() {
     if !tools::python_osc() {
-        return tools::missing(
-            "python-osc",
-            "is not importable by python3",
-            "python3 -m pip install python-osc",
-        );
+        return;
     }
     let h = serve();
     let out = Command::new("python3")

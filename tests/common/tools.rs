@@ -19,28 +19,34 @@ pub fn missing(tool: &str, problem: &str, remedy: &str) {
     println!("note: test skipped: {text}; under CI=true this fails");
 }
 
-/// Whether python3 can import python-osc.
-pub fn python_osc() -> bool {
-    Command::new("python3")
-        .args(["-c", "import pythonosc"])
-        .output()
-        .is_ok_and(|o| o.status.success())
-}
-
-/// Whether python3 with Pillow, piexif, numpy and PiDNG (what
-/// `tests/peers/fake_gphoto2.py` needs) is here; if not, [`missing`] has said so (and
-/// failed the test under CI).
-pub fn fake_gphoto2() -> bool {
+/// Whether python3 can import `modules` (comma-separated, as in an `import` line); if not,
+/// [`missing`] has said so, naming `what` and `remedy` (and failed the test under CI).
+pub fn python(modules: &str, what: &str, remedy: &str) -> bool {
     let ready = Command::new("python3")
-        .args(["-c", "import PIL, piexif, numpy, pidng"])
+        .args(["-c", &format!("import {modules}")])
         .output()
         .is_ok_and(|o| o.status.success());
     if !ready {
-        missing(
-            "python3 with Pillow, piexif, numpy and PiDNG (the fake gphoto2)",
-            "is not installed",
-            "python3 -m pip install pillow piexif numpy pidng",
-        );
+        missing(what, "is not importable by python3", remedy);
     }
     ready
+}
+
+/// Whether python3 can import python-osc (an independent OSC peer); see [`python`].
+pub fn python_osc() -> bool {
+    python(
+        "pythonosc",
+        "python-osc",
+        "python3 -m pip install python-osc",
+    )
+}
+
+/// Whether python3 has Pillow, piexif, numpy and PiDNG (what `tests/peers/fake_gphoto2.py`
+/// needs); see [`python`].
+pub fn fake_gphoto2() -> bool {
+    python(
+        "PIL, piexif, numpy, pidng",
+        "python3 with Pillow, piexif, numpy and PiDNG (the fake gphoto2)",
+        "python3 -m pip install pillow piexif numpy pidng",
+    )
 }
