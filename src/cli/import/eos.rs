@@ -17,7 +17,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 use rosc::{OscMessage, OscPacket, OscType};
-use visobjd_rig::eos::{self, Arg, EosChannel, EosGroup, EosPatch, Lists, Reply};
+use visobjd_rig::eos::{self, Arg, EosChannel, EosGroup, EosPatch, Lists, Piece, Reply};
 
 use crate::osc::framing::{self, Decoder, Frame, Framing};
 use crate::osc::packet;
@@ -166,6 +166,44 @@ impl Console<'_> {
         self.send(&batch)
     }
 
+    /// Reads replies, requesting `kind` indices ahead, until one completes a list.
+    /// `select` picks the replies that are pieces of such lists (the list's key, the
+    /// piece, and what the caller keeps of the address); everything else is skipped.
+    /// Returns what was kept, the index the list carries (checked to be below `n`) and the
+    /// list; `done` of the `n` indices are in already.
+    fn next_list<T>(
+        &mut self,
+        kind: &str,
+        lists: &mut Lists,
+        sent: &mut usize,
+        done: usize,
+        n: usize,
+        select: impl Fn(Reply) -> Option<(String, Piece, T)>,
+    ) -> anyhow::Result<(T, usize, Vec<Arg>)> {
+        loop {
+            self.request(kind, sent, done, n)?;
+            let m = self.next(&|| format!("the {kind} ({done} of {n} entries in)"))?;
+            let Some((key, piece, kept)) = select(eos::reply(&m.addr)) else {
+                continue;
+            };
+            let args = m.args.iter().map(arg).collect();
+            let Some(list) = lists
+                .add(&key, piece, args)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", self.source))?
+            else {
+                continue;
+            };
+            let Some(i) = index_of(&list).filter(|&i| i < n) else {
+                bail!(
+                    "{}: {}: the {kind} list's index is not one of 0..{n}",
+                    self.source,
+                    m.addr
+                );
+            };
+            return Ok((kept, i, list));
+        }
+    }
+
     /// Sends `count` and returns the number the console answers with.
     fn count(&mut self, kind: &str) -> anyhow::Result<usize> {
         self.send(&[format!("/eos/get/{kind}/count")])?;
@@ -245,30 +283,15 @@ pub fn read(
     let mut answered = std::collections::BTreeSet::new();
     while answered.len() < n {
         let done = answered.len();
-        c.request("patch", &mut sent, done, n)?;
-        let m = c.next(&|| format!("the patch ({done} of {n} entries in)"))?;
-        let Reply::Patch {
-            channel,
-            part,
-            piece,
-        } = eos::reply(&m.addr)
-        else {
-            continue;
-        };
-        let key = format!("patch/{channel}/{part}");
-        let args = m.args.iter().map(arg).collect();
-        let Some(list) = lists
-            .add(&key, piece, args)
-            .map_err(|e| anyhow::anyhow!("{source}: {e}"))?
-        else {
-            continue;
-        };
-        let Some(i) = index_of(&list).filter(|&i| i < n) else {
-            bail!(
-                "{source}: {}: the patch list's index is not one of 0..{n}",
-                m.addr
-            );
-        };
+        let ((channel, part), i, list) =
+            c.next_list("patch", &mut lists, &mut sent, done, n, |r| match r {
+                Reply::Patch {
+                    channel,
+                    part,
+                    piece,
+                } => Some((format!("patch/{channel}/{part}"), piece, (channel, part))),
+                _ => None,
+            })?;
         let entry =
             eos::patch_entry(channel, part, &list).map_err(|e| anyhow::anyhow!("{source}: {e}"))?;
         answered.insert(i);
@@ -284,30 +307,19 @@ pub fn read(
         let done = (0..g)
             .filter(|i| mains.contains_key(i) && members.contains_key(i))
             .count();
-        c.request("group", &mut sent, done, g)?;
-        let m = c.next(&|| format!("the groups ({done} of {g} in)"))?;
-        let Reply::Group {
-            number,
-            channels,
-            piece,
-        } = eos::reply(&m.addr)
-        else {
-            continue;
-        };
-        let key = format!("group/{number}/{channels}");
-        let args = m.args.iter().map(arg).collect();
-        let Some(list) = lists
-            .add(&key, piece, args)
-            .map_err(|e| anyhow::anyhow!("{source}: {e}"))?
-        else {
-            continue;
-        };
-        let Some(i) = index_of(&list).filter(|&i| i < g) else {
-            bail!(
-                "{source}: {}: the group list's index is not one of 0..{g}",
-                m.addr
-            );
-        };
+        let ((number, channels), i, list) =
+            c.next_list("group", &mut lists, &mut sent, done, g, |r| match r {
+                Reply::Group {
+                    number,
+                    channels,
+                    piece,
+                } => Some((
+                    format!("group/{number}/{channels}"),
+                    piece,
+                    (number, channels),
+                )),
+                _ => None,
+            })?;
         if channels {
             members.insert(i, list);
         } else {

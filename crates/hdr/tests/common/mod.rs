@@ -146,19 +146,11 @@ pub fn raw_frames_of<'a>(
     w: usize,
     h: usize,
 ) -> Vec<Frame<'a>> {
-    data.iter()
-        .zip(times)
-        .map(|(d, &t)| Frame {
-            width: w,
-            height: h,
-            exposure: exif(t),
-            pixels: Pixels::Raw {
-                values: d,
-                black: BLACK,
-                white: WHITE,
-            },
-        })
-        .collect()
+    frames_of(data, times, w, h, |values| Pixels::Raw {
+        values,
+        black: BLACK,
+        white: WHITE,
+    })
 }
 
 /// JPEG frames (`w` x `h`) of `data` with EXIF times `times`.
@@ -168,13 +160,24 @@ pub fn jpeg_frames_of<'a>(
     w: usize,
     h: usize,
 ) -> Vec<Frame<'a>> {
+    frames_of(data, times, w, h, Pixels::Jpeg)
+}
+
+/// Frames (`w` x `h`) of `data`, each made pixels by `pixels`, with EXIF times `times`.
+fn frames_of<'a, T>(
+    data: &'a [Vec<T>],
+    times: &[f64],
+    w: usize,
+    h: usize,
+    pixels: impl Fn(&'a [T]) -> Pixels<'a>,
+) -> Vec<Frame<'a>> {
     data.iter()
         .zip(times)
         .map(|(d, &t)| Frame {
             width: w,
             height: h,
             exposure: exif(t),
-            pixels: Pixels::Jpeg(d),
+            pixels: pixels(d),
         })
         .collect()
 }
