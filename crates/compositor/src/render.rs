@@ -1001,6 +1001,7 @@ pub fn render_reference(basis: &BasisImages, look: &Look, gain: f32) -> Vec<f32>
 mod tests {
     use super::*;
     use crate::basis::Precision;
+    use visobjd_scene::emitter::ColourModel;
     use visobjd_scene::look::Level;
 
     /// 7 lights over a 37x11 image (pixels not a multiple of the strip), HDR values up to 4.
@@ -1062,6 +1063,61 @@ mod tests {
                     raw[k][i]
                 );
                 assert!((clamped[k][i] - v.clamp(0.0, 1.0)).abs() <= 1e-4);
+            }
+        }
+    }
+
+    /// Light 1 (`rgb`) captured per emitter as well: its red, green and blue images are its
+    /// white image's R, G and B planes alone, which is what the sRGB primaries it is
+    /// modelled with show. Every kernel's preview, mixing them by the solved levels, is the
+    /// white-only preview of the same looks.
+    #[test]
+    fn per_emitter_images_mix_by_the_solved_levels() {
+        let (w, h, lights, planes) = planes();
+        let pixels = w * h;
+        let images = lights + 3;
+        let mut more = vec![0.0f32; 3 * images * pixels];
+        for ch in 0..3 {
+            for i in 0..images {
+                let src = if i < lights { i } else { 1 };
+                if i < lights || i - lights == ch {
+                    let from = (ch * lights + src) * pixels;
+                    let to = (ch * images + i) * pixels;
+                    more[to..to + pixels].copy_from_slice(&planes[from..from + pixels]);
+                }
+            }
+        }
+        let rgb = ColourModel::new(&visobjd_scene::profile::Profile::built_in("rgb").expect("rgb"));
+        let mut white = BasisImages::from_planes(w, h, lights, &planes, Precision::Single);
+        white.colours[1] = rgb.clone();
+        let mut split = BasisImages::from_planes(w, h, images, &more, Precision::Single);
+        split.lights = lights;
+        split.colours.truncate(lights);
+        split.colours[1] = rgb;
+        split.emitter_images = vec![None; lights];
+        split.emitter_images[1] = Some(lights);
+        let looks = looks(lights);
+        let refs: Vec<&Look> = looks.iter().collect();
+        let wts = weights(&split, &refs, 0.7);
+        for (name, kernel) in Kernel::all() {
+            let Some(kernel) = kernel else { continue };
+            let mut raw: Vec<Vec<f32>> = looks.iter().map(|_| vec![0.0; pixels * 3]).collect();
+            composite_with(kernel, &split, &wts, &mut raw, |rgb, out| {
+                for (i, px) in out.chunks_exact_mut(3).enumerate() {
+                    px.copy_from_slice(&[rgb[0][i], rgb[1][i], rgb[2][i]]);
+                }
+            });
+            for (k, look) in looks.iter().enumerate() {
+                let want = render_reference(&white, look, 0.7);
+                let reference = render_reference(&split, look, 0.7);
+                for (i, &v) in want.iter().enumerate() {
+                    for got in [raw[k][i], reference[i]] {
+                        assert!(
+                            (got - v).abs() <= 1e-4 * v.max(1.0),
+                            "{name} look {k} sample {i}: {got} vs {v}"
+                        );
+                    }
+                }
             }
         }
     }

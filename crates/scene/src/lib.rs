@@ -498,4 +498,37 @@ mod tests {
             .to_string();
         assert!(e.contains("unknown field `colour`"), "{e}");
     }
+
+    #[test]
+    fn emitter_basis_names_every_emitter_or_none() {
+        let light = "[[light]]\nchannel = 4\nbasis = \"b.exr\"\nprofile = \"irgb\"\nuniverse = 1\naddress = 1\n";
+        let full = format!(
+            "{light}[light.emitter_basis]\nred = \"b-red.exr\"\ngreen = \"b-green.exr\"\nblue = \"b-blue.exr\"\n"
+        );
+        let scene = Scene::parse(Path::new("/s"), &full).expect("parses");
+        let want: Vec<PathBuf> = ["red", "green", "blue"]
+            .map(|n| PathBuf::from(format!("/s/b-{n}.exr")))
+            .to_vec();
+        assert_eq!(scene.lights[0].emitter_basis, want, "in slot order");
+        let file = SceneFile::parse(Path::new("/s/scene.toml"), &full).expect("file");
+        let again = Scene::parse(Path::new("/s"), &file.to_toml().expect("toml")).expect("again");
+        assert_eq!(again.lights[0].emitter_basis, want, "written back, it reads the same");
+        for (text, says) in [
+            (
+                format!("{light}[light.emitter_basis]\nred = \"r.exr\"\n"),
+                "light 4: emitter_basis has no image for emitter `green` (give one per emitter, or none)",
+            ),
+            (
+                format!("{light}[light.emitter_basis]\nred = \"r.exr\"\ngreen = \"g.exr\"\nblue = \"b.exr\"\nwhite = \"w.exr\"\n"),
+                "light 4: emitter_basis `white` is not an emitter of profile `irgb` (red, green, blue)",
+            ),
+            (
+                format!("{light}[light.emitter_basis]\nred = \"../r.exr\"\ngreen = \"g.exr\"\nblue = \"b.exr\"\n"),
+                "light 4: emitter_basis `../r.exr` must be a relative path inside the scene folder",
+            ),
+        ] {
+            let e = Scene::parse(Path::new("/s"), &text).unwrap_err().to_string();
+            assert_eq!(e, format!("/s/scene.toml: {says}"));
+        }
+    }
 }
