@@ -512,22 +512,31 @@ mod tests {
         assert_eq!(scene.lights[0].emitter_basis, want, "in slot order");
         let file = SceneFile::parse(Path::new("/s/scene.toml"), &full).expect("file");
         let again = Scene::parse(Path::new("/s"), &file.to_toml().expect("toml")).expect("again");
-        assert_eq!(again.lights[0].emitter_basis, want, "written back, it reads the same");
+        assert_eq!(
+            again.lights[0].emitter_basis, want,
+            "written back, it reads the same"
+        );
         for (text, says) in [
             (
                 format!("{light}[light.emitter_basis]\nred = \"r.exr\"\n"),
                 "light 4: emitter_basis has no image for emitter `green` (give one per emitter, or none)",
             ),
             (
-                format!("{light}[light.emitter_basis]\nred = \"r.exr\"\ngreen = \"g.exr\"\nblue = \"b.exr\"\nwhite = \"w.exr\"\n"),
+                format!(
+                    "{light}[light.emitter_basis]\nred = \"r.exr\"\ngreen = \"g.exr\"\nblue = \"b.exr\"\nwhite = \"w.exr\"\n"
+                ),
                 "light 4: emitter_basis `white` is not an emitter of profile `irgb` (red, green, blue)",
             ),
             (
-                format!("{light}[light.emitter_basis]\nred = \"../r.exr\"\ngreen = \"g.exr\"\nblue = \"b.exr\"\n"),
+                format!(
+                    "{light}[light.emitter_basis]\nred = \"../r.exr\"\ngreen = \"g.exr\"\nblue = \"b.exr\"\n"
+                ),
                 "light 4: emitter_basis `../r.exr` must be a relative path inside the scene folder",
             ),
         ] {
-            let e = Scene::parse(Path::new("/s"), &text).unwrap_err().to_string();
+            let e = Scene::parse(Path::new("/s"), &text)
+                .unwrap_err()
+                .to_string();
             assert_eq!(e, format!("/s/scene.toml: {says}"));
         }
     }
