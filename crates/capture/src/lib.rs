@@ -857,7 +857,7 @@ pub fn colour_difference(shot: &Radiance, preview: &[f32]) -> Option<f64> {
     let mut lums: Vec<f64> = shot.pixels.iter().map(|p| lum(p.map(f64::from))).collect();
     lums.sort_by(f64::total_cmp);
     let white = *lums.get(lums.len() * 999 / 1000)?;
-    if !(white > 0.0) {
+    if white.is_nan() || white <= 0.0 {
         return None;
     }
     let lab = |p: [f64; 3]| xyz_to_lab(linear_srgb_to_xyz(p.map(|v| v.max(0.0) / white)));

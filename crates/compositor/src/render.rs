@@ -962,7 +962,7 @@ pub fn zeroed_outputs<O: Default + Clone + Send>(n: usize, len: usize) -> Vec<Ve
 
 /// Renders looks to 8-bit sRGB images.
 pub fn render_srgb8(basis: &BasisImages, looks: &[&Look], gain: f32) -> Vec<image::RgbImage> {
-    let w = weights(&basis, looks, gain);
+    let w = weights(basis, looks, gain);
     let mut outs = zeroed_outputs(looks.len(), basis.pixels() * 3);
     composite_srgb8(Kernel::detect(), basis, &w, &mut outs);
     outs.into_iter()
