@@ -126,3 +126,63 @@ fn a_stopped_capture_resumes_where_it_left_off() {
     }
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// The issue's colour test: lights 2 (irgb), 3 (rgb) and 4 (rgbw) are really other than
+/// their profiles say (the sim's `emitters.json`: an orange red, a yellowish green, a warm
+/// white). Captured per emitter, the preview of a saturated look (the per-emitter images
+/// weighed by the solved levels) matches a shot of it within 3 Delta E 2000; the preview
+/// from the white images alone, which trusts the profiles, misses by more.
+#[test]
+fn per_emitter_preview_matches_a_shot_where_white_only_misses() {
+    let dir = temp_dir("capture-emitters");
+    let scene = stage(&dir);
+    let sim = scene.join("capture/sim");
+    std::fs::create_dir_all(&sim).expect("mkdir sim");
+    let rgb = r#"{"name": "red", "xy": [0.60, 0.35], "flux": 0.25},
+                 {"name": "green", "xy": [0.33, 0.52], "flux": 0.6},
+                 {"name": "blue", "xy": [0.16, 0.11], "flux": 0.1}"#;
+    std::fs::write(
+        sim.join("emitters.json"),
+        format!(
+            r#"{{"2": [{rgb}], "3": [{rgb}], "4": [{rgb}, {{"name": "white", "xy": [0.40, 0.39], "flux": 0.8}}]}}"#
+        ),
+    )
+    .expect("write emitters.json");
+    let socket = UdpSocket::bind("127.0.0.1:0").expect("bind");
+    let cfg = config(&dir, &[socket.local_addr().expect("addr").port()], "");
+    let out = capture(&cfg, &["--lights", "2-4", "--emitters", "--format", "raw"]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stdout}\n{stderr}");
+    assert!(stdout.contains("emitters: 10 images written"), "{stdout}");
+    // scene.toml names every emitter's image of the three lights.
+    let toml = std::fs::read_to_string(scene.join("scene.toml")).expect("scene.toml");
+    for image in ["002-red.exr", "003-blue.exr", "004-white.exr"] {
+        assert!(toml.contains(image), "{image} in scene.toml:\n{toml}");
+        assert!(scene.join("basis").join(image).is_file(), "{image} written");
+    }
+    let line = stdout
+        .lines()
+        .find(|l| l.starts_with("colour validation:"))
+        .unwrap_or_else(|| panic!("no colour validation in:\n{stdout}"));
+    let figures: Vec<f64> = line
+        .split(|c: char| !(c.is_ascii_digit() || c == '.'))
+        .filter(|w| w.contains('.'))
+        .filter_map(|w| w.trim_end_matches('.').parse().ok())
+        .collect();
+    eprintln!("{line}");
+    let [per_emitter, white_only] = figures[..] else {
+        panic!("two figures in: {line}");
+    };
+    assert!(per_emitter < 3.0, "{line}");
+    assert!(white_only > 3.0 && white_only > per_emitter, "{line}");
+    // Run again: every image is there, nothing is shot twice.
+    let again = capture(&cfg, &["--lights", "2-4", "--emitters", "--format", "raw"]);
+    let stdout = String::from_utf8_lossy(&again.stdout);
+    assert!(
+        again.status.success() && stdout.contains("0 lights written, 3 already done"),
+        "{stdout}"
+    );
+    assert!(!stdout.contains("emitters:"), "{stdout}");
+    std::fs::remove_dir_all(&dir).ok();
+}

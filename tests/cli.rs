@@ -333,6 +333,45 @@ fn check_summarises_a_clean_scene_and_refuses_a_broken_one() {
     assert!(text.contains("6 in 6 groups, channels 1-6"), "{text}");
     assert!(text.contains("dimmer x3, irgb x3"), "{text}");
     assert!(text.contains("universe 1: 15/512 slots"), "{text}");
+    // The irgb lights are captured at white only: their colours are approximate.
+    let words = |t: &str| t.split_whitespace().collect::<Vec<_>>().join(" ");
+    assert!(
+        words(&text).contains("colour channels 1, 3, 5 approximate (captured at white only"),
+        "{text}"
+    );
+    // Light 3 gets its emitters' images: it is no longer approximate.
+    let toml = std::fs::read_to_string(dir.join("scene/scene.toml")).unwrap();
+    let mut file: toml::Table = toml.parse().unwrap();
+    let lights = file["light"].as_array_mut().unwrap();
+    let three = lights
+        .iter_mut()
+        .find(|l| l["channel"].as_integer() == Some(3))
+        .unwrap();
+    let basis = three["basis"].as_str().unwrap().to_string();
+    let mut images = toml::Table::new();
+    for emitter in ["red", "green", "blue"] {
+        let image = format!("{basis}-{emitter}.exr");
+        std::fs::copy(
+            dir.join("scene").join(&basis),
+            dir.join("scene").join(&image),
+        )
+        .unwrap();
+        images.insert(emitter.into(), image.into());
+    }
+    three
+        .as_table_mut()
+        .unwrap()
+        .insert("emitter_basis".into(), images.into());
+    std::fs::write(dir.join("scene/scene.toml"), file.to_string()).unwrap();
+    let text = String::from_utf8_lossy(&run(&["check", "--config", s(&config)]).stdout).to_string();
+    assert!(text.contains("9 basis images"), "{text}");
+    assert!(
+        words(&text).contains(
+            "colour channel 3 previewed from each emitter's image; channels 1, 5 approximate"
+        ),
+        "{text}"
+    );
+    std::fs::write(dir.join("scene/scene.toml"), &toml).unwrap();
 
     std::fs::write(&config, "scene = \"../scene\"\n[output]\nrate_hz = 100\n").unwrap();
     fails_with(&run(&["check", "--config", s(&config)]), "output.rate_hz");

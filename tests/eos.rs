@@ -64,8 +64,10 @@ fn a_44_light_look_arrives_as_exact_command_lines() {
     has("Chan 22 At 100 Enter");
     has("Chan 22 Red 49 Green 10.6 Blue 0 Enter");
     // sRGB 0.5 is byte 55 (21.6%) behind a dimmer, as on DMX; rgbw adds its white.
+    // The demo's profiles come from its MVR's GDTF types: found by the built-in's slots.
     let first = |p: &str| {
-        let i = (0..44).find(|&i| scene.profile(i).name == p).unwrap();
+        let slots = visobjd_scene::profile::Profile::built_in(p).unwrap().slots;
+        let i = (0..44).find(|&i| scene.profile(i).slots == slots).unwrap();
         (scene.lights[i].channel, i)
     };
     let (ch, i) = first("irgb");

@@ -55,7 +55,7 @@ fn batched_compositor_matches_the_scalar_reference() {
     let looks: Vec<Look> = (0..7).map(|_| random_look(12, &mut rng)).collect();
     let refs: Vec<&Look> = looks.iter().collect();
     let gain = 1.7;
-    let w = weights(&st.thumbs.colours, &refs, gain);
+    let w = weights(&st.thumbs, &refs, gain);
     let mut outs: Vec<Vec<f32>> = looks
         .iter()
         .map(|_| vec![0.0; st.thumbs.pixels() * 3])

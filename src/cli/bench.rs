@@ -396,7 +396,7 @@ impl<'a> Compositor<'a> {
             stage,
             kernel,
             product,
-            weights: weights(&stage.thumbs.colours, &refs, stage.gain),
+            weights: weights(&stage.thumbs, &refs, stage.gain),
             times: Vec::new(),
         }
     }

@@ -43,6 +43,10 @@ pub struct Args {
     /// Seed of the validation look (and of the sim camera's noise).
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// Also shoot each emitter of a colour-mixing light alone, so previews mix what the
+    /// camera saw of each emitter (scene.toml's `emitter_basis`).
+    #[arg(long)]
+    emitters: bool,
 }
 
 /// `1-44,50` as channels.
@@ -156,6 +160,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         width: args.width.max(1),
         format,
         seed: args.seed,
+        emitters: args.emitters,
     };
     let mut bar = Bar(indicatif::ProgressBar::new(0));
     let result = visobjd_capture::capture(
@@ -186,10 +191,22 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             o
         );
     }
+    if summary.emitter_images > 0 {
+        println!("emitters: {} images written", summary.emitter_images);
+    }
+    if let Some(o) = summary.overhead_per_emitter {
+        println!("capture's own time per emitter image (camera and settling aside): {o:.2} s");
+    }
     if let Some(v) = summary.validation {
         println!(
             "validation: a random look shot and composited from the basis differ by {:.1}% (median over the lit pixels)",
             v * 100.0
+        );
+    }
+    if let Some(c) = summary.colour_validation {
+        println!(
+            "colour validation: a saturated look shot and previewed differ by Delta E2000 {:.2} per emitter, {:.2} from white only (median over the lit pixels)",
+            c.per_emitter, c.white_only
         );
     }
     if !summary.no_light.is_empty() {

@@ -46,6 +46,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             |n| format!("{n} files in {}", config.references.display()),
         );
     let bytes = stage.proxy.bytes() + stage.thumbs.bytes();
+    // Colour-mixing lights: previewed from their emitters' own images, or approximated
+    // from their white image and their profile's colour model.
+    let (mut mixed, mut approximate) = (Vec::new(), Vec::new());
+    for (l, light) in scene.lights.iter().enumerate() {
+        if !light.emitter_basis.is_empty() {
+            mixed.push(light.channel);
+        } else if !scene.profile(l).emitters.is_empty() {
+            approximate.push(light.channel);
+        }
+    }
+    let emitter_images: usize = scene.lights.iter().map(|l| l.emitter_basis.len()).sum();
     let out = &config.output;
     let line = |k: &str, v: String| print!("{}", wrap(k, &v));
     line("config", format!("{} ok", config.path.display()));
@@ -81,13 +92,29 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "images",
         format!(
             "{} basis images, all readable; kept at {}x{} and {}x{}",
-            scene.lights.len(),
+            scene.lights.len() + emitter_images,
             stage.thumbs.width,
             stage.thumbs.height,
             stage.proxy.width,
             stage.proxy.height
         ),
     );
+    if !(mixed.is_empty() && approximate.is_empty()) {
+        let mut colour = Vec::new();
+        if !mixed.is_empty() {
+            colour.push(format!(
+                "{} previewed from each emitter's image",
+                visobjd_rig::channel_list(&mixed)
+            ));
+        }
+        if !approximate.is_empty() {
+            colour.push(format!(
+                "{} approximate (captured at white only: `capture --emitters` shows their real hues)",
+                visobjd_rig::channel_list(&approximate)
+            ));
+        }
+        line("colour", colour.join("; "));
+    }
     line(
         "memory",
         format!("about {} MB of basis images", bytes.div_ceil(1 << 20)),

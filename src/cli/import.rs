@@ -178,6 +178,17 @@ fn write(out: &Path, file: &SceneFile) -> anyhow::Result<PathBuf> {
     Ok(path)
 }
 
+/// Whether per-emitter images captured for a light still fit its (re-imported) profile:
+/// one image for each of its emitters, by name. A changed colour system drops them (the
+/// light is previewed from its white image until it is captured per emitter again).
+fn same_emitters(images: &std::collections::BTreeMap<String, String>, profile: &Profile) -> bool {
+    images.len() == profile.emitters.len()
+        && profile
+            .emitters
+            .iter()
+            .all(|e| images.contains_key(&e.name))
+}
+
 /// Where a new light's basis image goes: `basis/NNN.exr` by channel.
 fn basis_path(channel: u32) -> String {
     format!("basis/{channel:03}.exr")
@@ -298,6 +309,10 @@ fn merge(rig: &Rig, name: &str, old: Option<&SceneFile>, prune: bool) -> Merged 
             profile: profile.name.clone(),
             universe: f.universe,
             address: f.address,
+            emitter_basis: before
+                .filter(|l| same_emitters(&l.emitter_basis, profile))
+                .map(|l| l.emitter_basis.clone())
+                .unwrap_or_default(),
         });
     }
     let imported = lights.len();

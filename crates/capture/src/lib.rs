@@ -22,11 +22,13 @@ use std::time::{Duration, Instant};
 use rand::{RngExt, SeedableRng};
 use serde::{Deserialize, Serialize};
 use visobjd_camera::{Camera, Shutter};
-use visobjd_dmx::{Output, Patch};
+use visobjd_compositor::basis::Precision;
+use visobjd_dmx::{Frame, Output, Patch};
 use visobjd_hdr::{BracketSettings, ExposureFit, MergeSettings, Radiance, Response};
-use visobjd_scene::Scene;
-use visobjd_scene::emitter::ColourModel;
+use visobjd_scene::emitter::colour::{ciede2000, linear_srgb_to_xyz, xyz_to_lab};
+use visobjd_scene::emitter::{ColourModel, MAX_EMITTERS};
 use visobjd_scene::look::{Level, Look};
+use visobjd_scene::{Scene, SceneFile};
 
 /// What the camera is asked to write.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -77,6 +79,8 @@ pub struct Options {
     pub format: Format,
     /// Seed of the validation look.
     pub seed: u64,
+    /// Also shoot each additive emitter of a colour-mixing light alone (`--emitters`).
+    pub emitters: bool,
 }
 
 /// What a person watching the capture is told.
@@ -121,10 +125,27 @@ pub struct Summary {
     pub ambient_drift: Option<f64>,
     /// Median relative error of the validation shot against the composite.
     pub validation: Option<f64>,
+    /// With `--emitters`: a saturated look of the lights captured per emitter, shot and
+    /// compared with its previews.
+    pub colour_validation: Option<ColourValidation>,
+    /// Emitter images written in this run (`--emitters`).
+    pub emitter_images: usize,
+    /// Like `overhead_per_light`, per emitter image written.
+    pub overhead_per_emitter: Option<f64>,
     /// Seconds per light written that capture itself took: the light's time less the
     /// camera's calls and the wait for the lamps and the DMX (decoding, merging,
     /// writing, metering decisions).
     pub overhead_per_light: Option<f64>,
+}
+
+/// How far a shot of a saturated look is from its previews: the median CIEDE2000 over the
+/// pixels the shot lights, in CIELAB relative to the shot's brightest pixels.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ColourValidation {
+    /// The preview from the per-emitter images (each weighed by its solved level).
+    pub per_emitter: f64,
+    /// The preview from the white images and the profiles' colour models alone.
+    pub white_only: f64,
 }
 
 /// `capture.json`: what a resumed capture needs, and what a person wants to know later.
@@ -140,6 +161,9 @@ pub struct Record {
     pub lights: BTreeMap<u32, LightRecord>,
     /// Lights that showed no light, by channel.
     pub no_light: BTreeMap<u32, String>,
+    /// Per-emitter images written (`--emitters`), by channel and emitter name.
+    #[serde(default)]
+    pub emitters: BTreeMap<u32, BTreeMap<String, LightRecord>>,
     /// Relative ambient change between start and end.
     pub ambient_drift: Option<f64>,
     /// Median relative error of the validation shot.
@@ -290,7 +314,7 @@ impl Session<'_> {
             })
             .collect();
         let mut summary = Summary::default();
-        let mut own = Duration::ZERO;
+        let (mut own, mut own_emitters) = (Duration::ZERO, Duration::ZERO);
         self.progress.begin(todo.len());
         if self.opts.format == Format::Jpeg && self.record.response.is_none() {
             self.progress
@@ -298,7 +322,7 @@ impl Session<'_> {
             let all = Look {
                 levels: vec![WHITE; self.scene.lights.len()],
             };
-            self.show(&all)?;
+            self.show(&all, None)?;
             let shots = self.response_bracket()?;
             let frames: Vec<_> = shots.iter().map(decode::Shot::frame).collect();
             let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(self.opts.seed);
@@ -311,67 +335,24 @@ impl Session<'_> {
         let again = self.ambient("ambient-again.exr")?;
         for l in todo {
             let light = &self.scene.lights[l];
-            let (ch, name) = (light.channel, light.name.clone());
+            let ch = light.channel;
             if self.record.lights.contains_key(&ch) && light.basis.is_file() {
                 summary.resumed.push(ch);
+            } else if !self.white(l, &ambient, &again, &mut summary, &mut own)? {
                 self.progress.light_done();
                 continue;
             }
-            if self.stop.load(Ordering::SeqCst) {
-                return Err(CaptureError::Stopped);
+            if self.opts.emitters {
+                let (started, waited) = (Instant::now(), self.waited);
+                let n = self.emitters(l, &ambient)?;
+                summary.emitter_images += n;
+                own_emitters += started.elapsed().saturating_sub(self.waited - waited);
             }
-            self.progress.step(&format!("light {ch} ({name})"));
-            let (started, waited) = (Instant::now(), self.waited);
-            let mut look = Look::off(self.scene.lights.len());
-            look.levels[l] = WHITE;
-            let merged = self.shoot_look(&look, false)?;
-            let mut test = visobjd_hdr::light_test(&merged.radiance, &ambient)?;
-            let above = above_null(&merged.radiance, &ambient, &again);
-            test.shows_light &= above >= test.min_lit_pixels;
-            tracing::debug!("light {ch}: {test:?}, {above} samples above the ambient's own spread");
-            if !test.shows_light {
-                let why = format!(
-                    "light {ch} ({name}) shows no light: unpatched, lamp out, or aimed out of frame?"
-                );
-                self.progress.warn(&why);
-                self.record.no_light.insert(ch, why.clone());
-                summary.no_light.push((ch, why));
-                save_record(self.scene_dir, &self.record)?;
-                self.progress.light_done();
-                continue;
-            }
-            if merged.clipped_everywhere > 0 {
-                self.progress.warn(&format!(
-                    "light {ch} ({name}): {} pixels are clipped even at the shortest exposure: close the aperture or lower the ISO",
-                    merged.clipped_everywhere
-                ));
-            }
-            let basis = visobjd_hdr::subtract_ambient(&merged.radiance, &ambient)?;
-            visobjd_hdr::write_exr(&light.basis, &basis)?;
-            self.record.no_light.remove(&ch);
-            self.record.lights.insert(
-                ch,
-                LightRecord {
-                    basis: light
-                        .basis
-                        .strip_prefix(self.scene_dir)
-                        .unwrap_or(&light.basis)
-                        .display()
-                        .to_string(),
-                    dmx: self.dmx_of(l, &look),
-                    exposures: merged.exposures,
-                    clipped: merged.clipped_everywhere,
-                    time: now(),
-                },
-            );
-            save_record(self.scene_dir, &self.record)?;
-            summary.captured.push(ch);
-            own += started.elapsed().saturating_sub(self.waited - waited);
             self.progress.light_done();
         }
         self.progress.step("ambient light again: everything at 0");
         let end = self
-            .shoot_look(&Look::off(self.scene.lights.len()), true)?
+            .shoot_look(&Look::off(self.scene.lights.len()), None, true)?
             .radiance;
         let drift = visobjd_hdr::ambient_drift(&ambient, &again, &end)?;
         if drift.relative > 0.05 {
@@ -384,10 +365,148 @@ impl Session<'_> {
         self.record.ambient_drift = summary.ambient_drift;
         summary.overhead_per_light = (!summary.captured.is_empty())
             .then(|| own.as_secs_f64() / summary.captured.len() as f64);
+        summary.overhead_per_emitter = (summary.emitter_images > 0)
+            .then(|| own_emitters.as_secs_f64() / summary.emitter_images as f64);
         summary.validation = self.validate(&ambient)?;
         self.record.validation = summary.validation;
+        if self.opts.emitters {
+            summary.colour_validation = self.validate_colour(&ambient)?;
+        }
         save_record(self.scene_dir, &self.record)?;
         Ok(summary)
+    }
+
+    /// Light `l` at full white alone, merged, the ambient taken off and written as its
+    /// basis image; false (recorded and reported) when it shows no light.
+    fn white(
+        &mut self,
+        l: usize,
+        ambient: &Radiance,
+        again: &Radiance,
+        summary: &mut Summary,
+        own: &mut Duration,
+    ) -> Result<bool, CaptureError> {
+        let light = &self.scene.lights[l];
+        let (ch, name) = (light.channel, light.name.clone());
+        if self.stop.load(Ordering::SeqCst) {
+            return Err(CaptureError::Stopped);
+        }
+        self.progress.step(&format!("light {ch} ({name})"));
+        let (started, waited) = (Instant::now(), self.waited);
+        let mut look = Look::off(self.scene.lights.len());
+        look.levels[l] = WHITE;
+        let merged = self.shoot_look(&look, None, false)?;
+        let mut test = visobjd_hdr::light_test(&merged.radiance, ambient)?;
+        let above = above_null(&merged.radiance, ambient, again);
+        test.shows_light &= above >= test.min_lit_pixels;
+        tracing::debug!("light {ch}: {test:?}, {above} samples above the ambient's own spread");
+        if !test.shows_light {
+            let why = format!(
+                "light {ch} ({name}) shows no light: unpatched, lamp out, or aimed out of frame?"
+            );
+            self.progress.warn(&why);
+            self.record.no_light.insert(ch, why.clone());
+            summary.no_light.push((ch, why));
+            save_record(self.scene_dir, &self.record)?;
+            return Ok(false);
+        }
+        if merged.clipped_everywhere > 0 {
+            self.progress.warn(&format!(
+                "light {ch} ({name}): {} pixels are clipped even at the shortest exposure: close the aperture or lower the ISO",
+                merged.clipped_everywhere
+            ));
+        }
+        let basis = visobjd_hdr::subtract_ambient(&merged.radiance, ambient)?;
+        visobjd_hdr::write_exr(&light.basis, &basis)?;
+        self.record.no_light.remove(&ch);
+        self.record.lights.insert(
+            ch,
+            LightRecord {
+                basis: light
+                    .basis
+                    .strip_prefix(self.scene_dir)
+                    .unwrap_or(&light.basis)
+                    .display()
+                    .to_string(),
+                dmx: self.dmx_of(l, &self.patch.unmastered(&look)),
+                exposures: merged.exposures,
+                clipped: merged.clipped_everywhere,
+                time: now(),
+            },
+        );
+        save_record(self.scene_dir, &self.record)?;
+        summary.captured.push(ch);
+        *own += started.elapsed().saturating_sub(self.waited - waited);
+        Ok(true)
+    }
+
+    /// Light `l`'s additive emitters, each alone at full with its dimmer at full and every
+    /// other light at 0 (`--emitters`), written beside its basis image as
+    /// `NNN-EMITTER.exr` and, once all are, named in scene.toml's `emitter_basis`. Emitters
+    /// already in `capture.json` whose image exists are skipped. Returns how many images
+    /// it wrote (0 for a light without emitters).
+    fn emitters(&mut self, l: usize, ambient: &Radiance) -> Result<usize, CaptureError> {
+        let light = &self.scene.lights[l];
+        let (ch, light_name, basis) = (light.channel, light.name.clone(), light.basis.clone());
+        let names: Vec<String> = self
+            .scene
+            .profile(l)
+            .emitters
+            .iter()
+            .take(MAX_EMITTERS)
+            .map(|e| e.name.clone())
+            .collect();
+        let mut images = BTreeMap::new();
+        let mut written = 0;
+        for (k, name) in names.iter().enumerate() {
+            let path = emitter_path(&basis, name);
+            let relative = path
+                .strip_prefix(self.scene_dir)
+                .unwrap_or(&path)
+                .display()
+                .to_string();
+            let done = self
+                .record
+                .emitters
+                .get(&ch)
+                .is_some_and(|m| m.contains_key(name));
+            if !(done && path.is_file()) {
+                if self.stop.load(Ordering::SeqCst) {
+                    return Err(CaptureError::Stopped);
+                }
+                self.progress
+                    .step(&format!("light {ch} ({light_name}): {name} alone"));
+                let mut look = Look::off(self.scene.lights.len());
+                look.levels[l] = WHITE;
+                let merged = self.shoot_look(&look, Some((l, k)), false)?;
+                if merged.clipped_everywhere > 0 {
+                    self.progress.warn(&format!(
+                        "light {ch} ({light_name}) {name}: {} pixels are clipped even at the shortest exposure: close the aperture or lower the ISO",
+                        merged.clipped_everywhere
+                    ));
+                }
+                let image = visobjd_hdr::subtract_ambient(&merged.radiance, ambient)?;
+                visobjd_hdr::write_exr(&path, &image)?;
+                let dmx = self.dmx_of(l, &self.patch.emitter_alone(&look, l, k));
+                self.record.emitters.entry(ch).or_default().insert(
+                    name.clone(),
+                    LightRecord {
+                        basis: relative.clone(),
+                        dmx,
+                        exposures: merged.exposures,
+                        clipped: merged.clipped_everywhere,
+                        time: now(),
+                    },
+                );
+                save_record(self.scene_dir, &self.record)?;
+                written += 1;
+            }
+            images.insert(name.clone(), relative);
+        }
+        if !images.is_empty() {
+            set_emitter_basis(self.scene_dir, ch, images)?;
+        }
+        Ok(written)
     }
 
     /// The ambient light (everything at 0) merged once per capture and kept in the
@@ -403,16 +522,22 @@ impl Session<'_> {
         }
         self.progress.step("ambient light: everything at 0");
         let a = self
-            .shoot_look(&Look::off(self.scene.lights.len()), true)?
+            .shoot_look(&Look::off(self.scene.lights.len()), None, true)?
             .radiance;
         visobjd_hdr::write_exr(&path, &a)?;
         Ok(a)
     }
 
-    /// Puts `look` on the rig and waits for the lamps and for frames that carry it.
-    fn show(&mut self, look: &Look) -> Result<(), CaptureError> {
+    /// Puts `look` on the rig (with `alone`'s light and emitter alone, see
+    /// [`Patch::emitter_alone`]) and waits for the lamps and for frames that carry it.
+    fn show(&mut self, look: &Look, alone: Option<(usize, usize)>) -> Result<(), CaptureError> {
         let started = Instant::now();
-        self.output.set_look(look.clone(), 0.0);
+        match alone {
+            Some((l, k)) => self
+                .output
+                .set_frame(look.clone(), self.patch.emitter_alone(look, l, k)),
+            None => self.output.set_look(look.clone(), 0.0),
+        }
         let ticks = self.output.stats().ticks;
         std::thread::sleep(self.opts.settle);
         let deadline = Instant::now() + Duration::from_secs(5);
@@ -531,8 +656,13 @@ impl Session<'_> {
     /// exposure, the bracket is the metered exposure and two and four stops below it, so
     /// a light that adds nothing is merged exactly as the ambient was and compares with it
     /// on noise alone.
-    fn shoot_look(&mut self, look: &Look, dark: bool) -> Result<visobjd_hdr::Merged, CaptureError> {
-        self.show(look)?;
+    fn shoot_look(
+        &mut self,
+        look: &Look,
+        alone: Option<(usize, usize)>,
+        dark: bool,
+    ) -> Result<visobjd_hdr::Merged, CaptureError> {
+        self.show(look, alone)?;
         let response = self.record.response.clone();
         let (meter, t) = self.meter()?;
         let mut times = if dark || meter.high() < METERED {
@@ -572,10 +702,10 @@ impl Session<'_> {
         Ok(merged)
     }
 
-    /// The bytes light `l`'s slots are sent for `look`.
-    fn dmx_of(&self, l: usize, look: &Look) -> (u16, u16, Vec<u8>) {
+    /// The bytes light `l`'s slots are sent in `frame` (unmastered levels).
+    fn dmx_of(&self, l: usize, frame: &Frame) -> (u16, u16, Vec<u8>) {
         let patch = &self.patch;
-        let bytes = patch.quantise(&patch.unmastered(look));
+        let bytes = patch.quantise(frame);
         let light = &self.scene.lights[l];
         let u = patch
             .universes()
@@ -638,10 +768,144 @@ impl Session<'_> {
         let Some(composite) = composite else {
             return Ok(None);
         };
-        let shot = self.shoot_look(&look, false)?.radiance;
+        let shot = self.shoot_look(&look, None, false)?.radiance;
         let shot = visobjd_hdr::subtract_ambient(&shot, ambient)?;
         Ok(relative_error(&shot, &composite))
     }
+}
+
+impl Session<'_> {
+    /// A saturated look of up to four lights captured per emitter (the scene as the
+    /// capture left it), shot and compared with its preview from the per-emitter images
+    /// and with its preview from the white images alone ([`colour_difference`]). None when
+    /// no light has its emitter images.
+    fn validate_colour(
+        &mut self,
+        ambient: &Radiance,
+    ) -> Result<Option<ColourValidation>, CaptureError> {
+        let scene = Scene::load(self.scene_dir).map_err(|e| CaptureError::Files(e.to_string()))?;
+        let lit: Vec<usize> = (0..scene.lights.len())
+            .filter(|&l| {
+                !scene.lights[l].emitter_basis.is_empty()
+                    && self.record.lights.contains_key(&scene.lights[l].channel)
+            })
+            .take(4)
+            .collect();
+        if lit.is_empty() {
+            return Ok(None);
+        }
+        self.progress
+            .step("colour validation: a saturated look of the lights captured per emitter");
+        let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(self.opts.seed ^ 0xc01);
+        let mut look = Look::off(scene.lights.len());
+        for &l in &lit {
+            look.levels[l] = Level {
+                intensity: rng.random_range(0.6f32..1.0),
+                color: SATURATED[rng.random_range(0..SATURATED.len())],
+            };
+        }
+        // The previews of the lit lights alone: the others' images may not exist yet.
+        let mut part = scene.clone();
+        part.lights = lit.iter().map(|&l| scene.lights[l].clone()).collect();
+        let part_look = Look {
+            levels: lit.iter().map(|&l| look.levels[l]).collect(),
+        };
+        let preview = |s: &Scene| -> Result<Vec<f32>, CaptureError> {
+            let basis = visobjd_compositor::basis::load(s, &[(0, Precision::Single)])
+                .map_err(|e| CaptureError::Files(e.to_string()))?;
+            let basis = basis
+                .first()
+                .ok_or_else(|| CaptureError::Files("no basis images".into()))?;
+            Ok(visobjd_compositor::render::render_reference(
+                basis, &part_look, 1.0,
+            ))
+        };
+        let per_emitter = preview(&part)?;
+        for light in &mut part.lights {
+            light.emitter_basis.clear();
+        }
+        let white_only = preview(&part)?;
+        let shot = self.shoot_look(&look, None, false)?.radiance;
+        let shot = visobjd_hdr::subtract_ambient(&shot, ambient)?;
+        Ok(colour_difference(&shot, &per_emitter)
+            .zip(colour_difference(&shot, &white_only))
+            .map(|(per_emitter, white_only)| ColourValidation {
+                per_emitter,
+                white_only,
+            }))
+    }
+}
+
+/// The colours of the colour validation: saturated, each mixing two or three emitters.
+const SATURATED: &[[f32; 3]] = &[
+    [1.0, 0.25, 0.0],
+    [1.0, 0.0, 0.6],
+    [0.0, 1.0, 0.35],
+    [0.2, 0.35, 1.0],
+    [0.6, 0.0, 1.0],
+    [0.0, 0.8, 1.0],
+];
+
+/// Median CIEDE2000 between a shot and a preview (interleaved linear RGB of the same
+/// size) over the pixels the shot lights (luminance above 5% of its brightest), both in
+/// CIELAB with the shot's brightest pixels (99.9th percentile of luminance) as white.
+pub fn colour_difference(shot: &Radiance, preview: &[f32]) -> Option<f64> {
+    if preview.len() != shot.pixels.len() * 3 {
+        return None;
+    }
+    let lum = |p: [f64; 3]| linear_srgb_to_xyz(p)[1];
+    let mut lums: Vec<f64> = shot.pixels.iter().map(|p| lum(p.map(f64::from))).collect();
+    lums.sort_by(f64::total_cmp);
+    let white = *lums.get(lums.len() * 999 / 1000)?;
+    if white.is_nan() || white <= 0.0 {
+        return None;
+    }
+    let lab = |p: [f64; 3]| xyz_to_lab(linear_srgb_to_xyz(p.map(|v| v.max(0.0) / white)));
+    let mut de: Vec<f64> = shot
+        .pixels
+        .iter()
+        .zip(preview.chunks_exact(3))
+        .map(|(s, p)| (s.map(f64::from), [0, 1, 2].map(|k| f64::from(p[k]))))
+        .filter(|(s, _)| lum(*s) > 0.05 * white)
+        .map(|(s, p)| ciede2000(lab(s), lab(p)))
+        .collect();
+    if de.is_empty() {
+        return None;
+    }
+    de.sort_by(f64::total_cmp);
+    Some(de[de.len() / 2])
+}
+
+/// Where emitter `name`'s image of a light goes: beside its basis image, `NNN-NAME.exr`.
+fn emitter_path(basis: &Path, name: &str) -> PathBuf {
+    let stem = basis
+        .file_stem()
+        .map_or_else(|| "light".into(), |s| s.to_string_lossy());
+    basis.with_file_name(format!("{stem}-{name}.exr"))
+}
+
+/// Names light `channel`'s per-emitter images in `scene_dir/scene.toml`
+/// (`emitter_basis`), checked as a scene before the atomic write; unchanged, nothing is
+/// written.
+fn set_emitter_basis(
+    scene_dir: &Path,
+    channel: u32,
+    images: BTreeMap<String, String>,
+) -> Result<(), CaptureError> {
+    let path = scene_dir.join("scene.toml");
+    let fail = |e: String| CaptureError::Files(format!("{}: {e}", path.display()));
+    let text = std::fs::read_to_string(&path).map_err(|e| fail(e.to_string()))?;
+    let mut file = SceneFile::parse(&path, &text).map_err(|e| fail(e.to_string()))?;
+    let Some(light) = file.light.iter_mut().find(|l| l.channel == channel) else {
+        return Err(fail(format!("light {channel} is no longer in the scene")));
+    };
+    if light.emitter_basis == images {
+        return Ok(());
+    }
+    light.emitter_basis = images;
+    let text = file.to_toml().map_err(fail)?;
+    Scene::parse(scene_dir, &text).map_err(|e| fail(e.to_string()))?;
+    visobjd_files::write_atomic(&path, text.as_bytes()).map_err(|e| fail(e.to_string()))
 }
 
 /// The longest exposure capture uses, in seconds: long enough for a dim light at a

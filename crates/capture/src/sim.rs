@@ -7,6 +7,13 @@
 //! linear 14-bit raw (an uncompressed Bayer DNG with its black and white levels and
 //! colour matrix, read back through `rawler` like a camera's). Each file
 //! carries its exposure in EXIF, read back like a real camera's.
+//!
+//! The fixtures may be other than their profiles say: `capture/sim/emitters.json` gives,
+//! per channel, the emitters as they really are (`{"3": [{"name": "red", "xy": [0.6, 0.35],
+//! "flux": 0.3}]}`, keys as in `[[profile.emitter]]`; emitters not listed stay as the
+//! profile has them), and the sim lights those lights by
+//! each emitter's true colour ([`Patch::multipliers_as`]): what a per-emitter capture is
+//! for, tested against a preview made without that knowledge.
 
 use std::io::Cursor;
 use std::net::{SocketAddr, UdpSocket};
@@ -22,6 +29,8 @@ use visobjd_camera::{
 use visobjd_dmx::Patch;
 use visobjd_dmx::patch::SLOTS;
 use visobjd_scene::Scene;
+use visobjd_scene::emitter::ColourModel;
+use visobjd_scene::profile::{EmitterFile, Profile};
 
 use crate::Format;
 
@@ -56,6 +65,9 @@ pub struct SimCamera {
     dmx: Vec<[u8; SLOTS]>,
     /// Per light: its basis image at sensor resolution, linear RGB.
     truth: Vec<Vec<[f32; 3]>>,
+    /// Per light: its emitters as they really are (`capture/sim/emitters.json`), or `None`
+    /// where the profile is right.
+    real: Vec<Option<ColourModel>>,
     width: usize,
     height: usize,
     format: Format,
@@ -116,7 +128,9 @@ impl SimCamera {
             })
             .collect();
         let patch = Patch::new(scene);
+        let real = real_emitters(scene, &stage.join("emitters.json"))?;
         Ok(SimCamera {
+            real,
             socket,
             dmx: vec![[0; SLOTS]; patch.universes().len()],
             patch,
@@ -192,7 +206,7 @@ impl SimCamera {
 
     /// The sensor's reading, 0..1 of full scale, before clipping.
     fn expose(&mut self, seconds: f64) -> Vec<[f32; 3]> {
-        let m = self.patch.multipliers(&self.dmx);
+        let m = self.patch.multipliers_as(&self.dmx, &self.real);
         let relative = (seconds * ISO / (F_NUMBER * F_NUMBER)) as f32;
         let mut out = vec![[0.0f32; 3]; self.width * self.height];
         for (light, basis) in m.iter().zip(&self.truth) {
@@ -218,6 +232,31 @@ impl SimCamera {
         }
         out
     }
+}
+
+/// The colour models of the fixtures as `path` says they really are (none without the
+/// file): each listed light's profile with its emitters' xy and flux replaced.
+fn real_emitters(scene: &Scene, path: &Path) -> Result<Vec<Option<ColourModel>>, String> {
+    let mut real = vec![None; scene.lights.len()];
+    let Ok(text) = std::fs::read_to_string(path) else {
+        return Ok(real);
+    };
+    let given: std::collections::BTreeMap<u32, Vec<EmitterFile>> =
+        serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))?;
+    for (channel, emitters) in given {
+        let l = scene
+            .light_index(channel)
+            .ok_or_else(|| format!("{}: channel {channel} is not in the scene", path.display()))?;
+        let mut file = scene.profile(l).to_file();
+        for e in emitters {
+            file.emitters.retain(|x| x.name != e.name);
+            file.emitters.push(e);
+        }
+        let profile = Profile::from_file(&file)
+            .map_err(|e| format!("{}: channel {channel}: {e}", path.display()))?;
+        real[l] = Some(ColourModel::new(&profile));
+    }
+    Ok(real)
 }
 
 fn io(call: &str, source: std::io::Error) -> Error {

@@ -1,7 +1,7 @@
 //! Basis images: one linear HDR image per light, read once at load and kept at the
 //! resolutions in use, in the planar layout the compositor wants.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use half::f16;
 use rayon::prelude::*;
@@ -29,8 +29,10 @@ enum Samples {
 }
 
 /// All lights' basis images at one resolution, packed for the compositor: the image is cut
-/// into strips of [`STRIP`] pixels, and each strip holds, per channel and light, that
-/// light's [`STRIP`] samples (zero past the last pixel).
+/// into strips of [`STRIP`] pixels, and each strip holds, per channel and image, that
+/// image's [`STRIP`] samples (zero past the last pixel). Images `0..lights` are the lights'
+/// white images, in light order; a light captured per emitter has one more image per
+/// emitter after them ([`BasisImages::emitter_images`]).
 ///
 /// A render is a matrix product (candidates x lights) x (lights x pixels) per channel; this
 /// layout makes every strip's (lights x pixels) panel one contiguous block, so the
@@ -43,6 +45,11 @@ pub struct BasisImages {
     pub height: usize,
     /// Number of lights.
     pub lights: usize,
+    /// Number of images: the lights' white images, then the per-emitter ones.
+    pub images: usize,
+    /// Per light, the first of its per-emitter images (one per emitter of its colour model,
+    /// in slot order), or `None` when it was captured at white only.
+    pub emitter_images: Vec<Option<usize>>,
     /// Per light, how a look's level becomes the multiplier of its image (each image is
     /// its light at white through its profile): from the scene at [`load`], plain linear
     /// colour for images made by [`BasisImages::from_planes`].
@@ -50,7 +57,7 @@ pub struct BasisImages {
     samples: Samples,
 }
 
-/// One strip's panel as stored: `[channel][light][STRIP]`.
+/// One strip's panel as stored: `[channel][image][STRIP]`.
 pub enum Panel<'a> {
     /// Half floats (converted by the compositor).
     Half(&'a [f16]),
@@ -92,13 +99,22 @@ impl Rows<'_> {
 }
 
 impl BasisImages {
-    /// All-black images, ready to be filled.
-    fn zeroed(width: usize, height: usize, lights: usize, precision: Precision) -> BasisImages {
-        let n = (width * height).div_ceil(STRIP) * 3 * lights * STRIP;
+    /// All-black images, ready to be filled: the lights' white images, then `emitter_images`.
+    fn zeroed(
+        width: usize,
+        height: usize,
+        lights: usize,
+        emitter_images: Vec<Option<usize>>,
+        images: usize,
+        precision: Precision,
+    ) -> BasisImages {
+        let n = (width * height).div_ceil(STRIP) * 3 * images * STRIP;
         BasisImages {
             width,
             height,
             lights,
+            images,
+            emitter_images,
             colours: vec![ColourModel::plain(); lights],
             samples: match precision {
                 Precision::Half => Samples::Half(in_huge_pages(n, f16::ZERO)),
@@ -119,12 +135,13 @@ impl BasisImages {
     ) -> BasisImages {
         let pixels = width * height;
         assert_eq!(planes.len(), 3 * lights * pixels);
-        let mut img = BasisImages::zeroed(width, height, lights, precision);
+        let mut img =
+            BasisImages::zeroed(width, height, lights, vec![None; lights], lights, precision);
         let lim = match precision {
             Precision::Half => f16::MAX.to_f32(),
             Precision::Single => f32::MAX,
         };
-        for (l, rows) in img.rows_by_light().into_iter().enumerate() {
+        for (l, rows) in img.rows_by_image().into_iter().enumerate() {
             rows.fill(&std::array::from_fn(|ch| {
                 let start = (ch * lights + l) * pixels;
                 planes[start..start + pixels]
@@ -136,20 +153,20 @@ impl BasisImages {
         img
     }
 
-    /// Every light's rows (strip then channel order), so lights can be filled in parallel.
-    fn rows_by_light(&mut self) -> Vec<Rows<'_>> {
-        fn split<T>(data: &mut [T], lights: usize) -> Vec<Vec<&mut [T]>> {
-            let mut out: Vec<Vec<&mut [T]>> = (0..lights)
-                .map(|_| Vec::with_capacity(data.len() / STRIP / lights.max(1)))
+    /// Every image's rows (strip then channel order), so images can be filled in parallel.
+    fn rows_by_image(&mut self) -> Vec<Rows<'_>> {
+        fn split<T>(data: &mut [T], images: usize) -> Vec<Vec<&mut [T]>> {
+            let mut out: Vec<Vec<&mut [T]>> = (0..images)
+                .map(|_| Vec::with_capacity(data.len() / STRIP / images.max(1)))
                 .collect();
             for (r, row) in data.chunks_mut(STRIP).enumerate() {
-                out[r % lights].push(row);
+                out[r % images].push(row);
             }
             out
         }
         match &mut self.samples {
-            Samples::Half(d) => split(d, self.lights).into_iter().map(Rows::Half).collect(),
-            Samples::Single(d) => split(d, self.lights)
+            Samples::Half(d) => split(d, self.images).into_iter().map(Rows::Half).collect(),
+            Samples::Single(d) => split(d, self.images)
                 .into_iter()
                 .map(Rows::Single)
                 .collect(),
@@ -174,26 +191,27 @@ impl BasisImages {
         }
     }
 
-    /// Strip `s`'s panel, `3 * lights * STRIP` samples.
+    /// Strip `s`'s panel, `3 * images * STRIP` samples.
     pub fn panel(&self, s: usize) -> Panel<'_> {
-        let n = 3 * self.lights * STRIP;
+        let n = 3 * self.images * STRIP;
         match &self.samples {
             Samples::Half(d) => Panel::Half(&d[s * n..(s + 1) * n]),
             Samples::Single(d) => Panel::Single(&d[s * n..(s + 1) * n]),
         }
     }
 
-    /// One sample of light `l`, channel `ch` (0 = R, 1 = G, 2 = B), at pixel `p`, as stored.
+    /// One sample of image `l`, channel `ch` (0 = R, 1 = G, 2 = B), at pixel `p`, as stored.
     fn sample(&self, ch: usize, l: usize, p: usize) -> f32 {
-        let i = ((p / STRIP * 3 + ch) * self.lights + l) * STRIP + p % STRIP;
+        let i = ((p / STRIP * 3 + ch) * self.images + l) * STRIP + p % STRIP;
         match &self.samples {
             Samples::Half(d) => d[i].to_f32(),
             Samples::Single(d) => d[i],
         }
     }
 
-    /// One light's plane for one channel (0 = R, 1 = G, 2 = B), as stored: for the scalar
-    /// reference and for measuring lights, not for the compositor.
+    /// One image's plane for one channel (0 = R, 1 = G, 2 = B), as stored: for the scalar
+    /// reference and for measuring lights (image `l` < `lights` is light `l` at white), not
+    /// for the compositor.
     pub fn plane(&self, channel: usize, light: usize) -> Vec<f32> {
         (0..self.pixels())
             .map(|p| self.sample(channel, light, p))
@@ -359,13 +377,13 @@ fn weights_1d(n: usize, nn: usize) -> Vec<Vec<(usize, f32)>> {
         .collect()
 }
 
-/// One light's basis image, validated, as planar `[R, G, B]` (negatives clamped to 0).
-fn decode(light: &visobjd_scene::Light) -> Result<(usize, usize, [Vec<f32>; 3]), SceneError> {
+/// One basis image, validated, as planar `[R, G, B]` (negatives clamped to 0).
+fn decode(path: &Path) -> Result<(usize, usize, [Vec<f32>; 3]), SceneError> {
     let fail = |message: String| SceneError::Basis {
-        path: light.basis.clone(),
+        path: path.to_path_buf(),
         message,
     };
-    let img = read_exr(&light.basis).map_err(fail)?;
+    let img = read_exr(path).map_err(fail)?;
     if img.pixels.iter().flatten().any(|v| !v.is_finite()) {
         return Err(fail(
             "contains NaN or infinite samples; re-export it with finite values".into(),
@@ -384,29 +402,48 @@ fn decode(light: &visobjd_scene::Light) -> Result<(usize, usize, [Vec<f32>; 3]),
 /// file. If a sample exceeds half-float range, the scene is loaded again in single
 /// precision.
 pub fn load(scene: &Scene, widths: &[(usize, Precision)]) -> Result<Vec<BasisImages>, SceneError> {
-    let first = decode(&scene.lights[0])?;
+    let first = decode(&scene.lights[0].basis)?;
     let (w, h) = (first.0, first.1);
     let lights = scene.lights.len();
+    // Every image in panel order: the lights' white images, then the per-emitter ones.
+    let mut files: Vec<&Path> = scene.lights.iter().map(|l| l.basis.as_path()).collect();
+    let emitter_images: Vec<Option<usize>> = scene
+        .lights
+        .iter()
+        .map(|l| {
+            (!l.emitter_basis.is_empty()).then(|| {
+                let first = files.len();
+                files.extend(l.emitter_basis.iter().map(PathBuf::as_path));
+                first
+            })
+        })
+        .collect();
     let mut images: Vec<BasisImages> = widths
         .iter()
         .map(|&(width, precision)| {
             let (nw, nh) = scaled_size(w, h, width);
-            BasisImages::zeroed(nw, nh, lights, precision)
+            BasisImages::zeroed(
+                nw,
+                nh,
+                lights,
+                emitter_images.clone(),
+                files.len(),
+                precision,
+            )
         })
         .collect();
-    let mut slots: Vec<Vec<Rows>> = (0..lights).map(|_| Vec::new()).collect();
+    let mut slots: Vec<Vec<Rows>> = (0..files.len()).map(|_| Vec::new()).collect();
     for img in &mut images {
-        for (slot, rows) in slots.iter_mut().zip(img.rows_by_light()) {
+        for (slot, rows) in slots.iter_mut().zip(img.rows_by_image()) {
             slot.push(rows);
         }
     }
     let first = std::sync::Mutex::new(Some(first));
-    let results: Vec<Result<bool, SceneError>> = scene
-        .lights
+    let results: Vec<Result<bool, SceneError>> = files
         .par_iter()
         .zip(slots)
         .enumerate()
-        .map(|(i, (light, slots))| {
+        .map(|(i, (&file, slots))| {
             let taken = if i == 0 {
                 first.lock().map_or(None, |mut f| f.take())
             } else {
@@ -414,11 +451,11 @@ pub fn load(scene: &Scene, widths: &[(usize, Precision)]) -> Result<Vec<BasisIma
             };
             let (lw, lh, planes) = match taken {
                 Some(d) => d,
-                None => decode(light)?,
+                None => decode(file)?,
             };
             if (lw, lh) != (w, h) {
                 return Err(SceneError::Basis {
-                    path: light.basis.clone(),
+                    path: file.to_path_buf(),
                     message: format!(
                         "is {lw}x{lh} but {} is {w}x{h}; every basis image must have the same size",
                         scene.lights[0].basis.display()

@@ -18,7 +18,6 @@ use rayon::prelude::*;
 use crate::basis::{BasisImages, Panel};
 use crate::color::encode_srgb8_planar;
 use crate::cpu::{Avx2Fma, Avx512F, NonTemporal, non_temporal};
-use visobjd_scene::emitter::ColourModel;
 use visobjd_scene::look::Look;
 
 /// Pixels per strip: six 16-lane AVX-512 vectors, the width of the register block.
@@ -61,18 +60,38 @@ pub fn exposure_gain(stops: f32) -> f32 {
     stops.exp2()
 }
 
-/// Per-light linear RGB multipliers of each look, times `gain`: `weights[c][l]`, each
-/// light's through its colour model (`colours[l]`, [`BasisImages::colours`]), computed
-/// once per look so the kernels only multiply and add.
-pub fn weights(colours: &[ColourModel], looks: &[&Look], gain: f32) -> Vec<Vec<[f32; 3]>> {
+/// Per-image linear RGB multipliers of each look, times `gain`: `weights[c][i]` for every
+/// image of `basis`, computed once per look so the kernels only multiply and add. A light
+/// captured at white only weighs its white image by its colour model's multiplier
+/// ([`BasisImages::colours`]); one captured per emitter weighs each emitter's image by the
+/// level the colour solve sends that emitter (times the intensity), and its white image by
+/// 0, so the preview is the sum of what the camera saw of each emitter.
+pub fn weights(basis: &BasisImages, looks: &[&Look], gain: f32) -> Vec<Vec<[f32; 3]>> {
     looks
         .par_iter()
         .map(|look| {
-            look.levels
+            let mut w = vec![[0.0; 3]; basis.images];
+            for (l, ((lv, colour), emitters)) in look
+                .levels
                 .iter()
-                .zip(colours)
-                .map(|(lv, colour)| colour.multiplier(lv).map(|m| m * gain))
-                .collect()
+                .zip(&basis.colours)
+                .zip(&basis.emitter_images)
+                .enumerate()
+            {
+                match emitters {
+                    None => w[l] = colour.multiplier(lv).map(|m| m * gain),
+                    Some(first) if lv.intensity > 0.0 => {
+                        let k = lv.intensity * gain;
+                        for (wi, level) in
+                            w[*first..].iter_mut().zip(colour.solve(lv.color).levels())
+                        {
+                            *wi = [*level as f32 * k; 3];
+                        }
+                    }
+                    Some(_) => {}
+                }
+            }
+            w
         })
         .collect()
 }
@@ -709,9 +728,9 @@ fn run<O: Send>(
 ) {
     let pixels = basis.pixels();
     assert!(outputs.iter().all(|o| o.len() == pixels * 3));
-    assert!(weights.iter().all(|w| w.len() >= basis.lights));
+    assert!(weights.iter().all(|w| w.len() >= basis.images));
     let cands = weights.len().min(outputs.len());
-    if cands == 0 || pixels == 0 || basis.lights == 0 {
+    if cands == 0 || pixels == 0 || basis.images == 0 {
         return;
     }
     let plan = Plan::new(kernel, basis, &weights[..cands], chunk);
@@ -781,7 +800,7 @@ impl<'a> Plan<'a> {
         weights: &[Vec<[f32; 3]>],
         chunk: usize,
     ) -> Self {
-        let lights = basis.lights;
+        let lights = basis.images;
         let blocks = weights.len().div_ceil(MR);
         let size = lights.div_ceil(lights.div_ceil(chunk.max(1)));
         let chunks: Vec<std::ops::Range<usize>> = (0..lights)
@@ -839,7 +858,7 @@ impl<'a> Plan<'a> {
             ref chunks,
             ..
         } = *self;
-        let lights = basis.lights;
+        let lights = basis.images;
         let Scratch { panel, sums, codes } = scratch;
         let src = basis.panel(strip);
         // The next strip's panel is prefetched, its lines shared out over this strip's
@@ -943,7 +962,7 @@ pub fn zeroed_outputs<O: Default + Clone + Send>(n: usize, len: usize) -> Vec<Ve
 
 /// Renders looks to 8-bit sRGB images.
 pub fn render_srgb8(basis: &BasisImages, looks: &[&Look], gain: f32) -> Vec<image::RgbImage> {
-    let w = weights(&basis.colours, looks, gain);
+    let w = weights(basis, looks, gain);
     let mut outs = zeroed_outputs(looks.len(), basis.pixels() * 3);
     composite_srgb8(Kernel::detect(), basis, &w, &mut outs);
     outs.into_iter()
@@ -958,11 +977,20 @@ pub fn render_srgb8(basis: &BasisImages, looks: &[&Look], gain: f32) -> Vec<imag
 /// are tested against it.
 pub fn render_reference(basis: &BasisImages, look: &Look, gain: f32) -> Vec<f32> {
     let mut out = vec![0.0f32; basis.pixels() * 3];
-    for (l, (lv, colour)) in look.levels.iter().zip(&basis.colours).enumerate() {
-        let m = colour.multiplier(lv);
+    let mut add = |image: usize, m: [f32; 3]| {
         for ch in 0..3 {
-            for (p, &v) in basis.plane(ch, l).iter().enumerate() {
+            for (p, &v) in basis.plane(ch, image).iter().enumerate() {
                 out[p * 3 + ch] += gain * m[ch] * v;
+            }
+        }
+    };
+    for (l, (lv, colour)) in look.levels.iter().zip(&basis.colours).enumerate() {
+        match basis.emitter_images[l] {
+            None => add(l, colour.multiplier(lv)),
+            Some(first) => {
+                for (k, level) in colour.solve(lv.color).levels().iter().enumerate() {
+                    add(first + k, [*level as f32 * lv.intensity; 3]);
+                }
             }
         }
     }
@@ -973,6 +1001,7 @@ pub fn render_reference(basis: &BasisImages, look: &Look, gain: f32) -> Vec<f32>
 mod tests {
     use super::*;
     use crate::basis::Precision;
+    use visobjd_scene::emitter::ColourModel;
     use visobjd_scene::look::Level;
 
     /// 7 lights over a 37x11 image (pixels not a multiple of the strip), HDR values up to 4.
@@ -1016,7 +1045,7 @@ mod tests {
         let basis = BasisImages::from_planes(w, h, lights, &planes, precision);
         let looks = looks(lights);
         let refs: Vec<&Look> = looks.iter().collect();
-        let wts = weights(&basis.colours, &refs, 0.7);
+        let wts = weights(&basis, &refs, 0.7);
         let mut raw: Vec<Vec<f32>> = looks.iter().map(|_| vec![0.0; w * h * 3]).collect();
         composite_chunked(kernel, &basis, &wts, &mut raw, chunk, |rgb, out| {
             for (i, px) in out.chunks_exact_mut(3).enumerate() {
@@ -1034,6 +1063,61 @@ mod tests {
                     raw[k][i]
                 );
                 assert!((clamped[k][i] - v.clamp(0.0, 1.0)).abs() <= 1e-4);
+            }
+        }
+    }
+
+    /// Light 1 (`rgb`) captured per emitter as well: its red, green and blue images are its
+    /// white image's R, G and B planes alone, which is what the sRGB primaries it is
+    /// modelled with show. Every kernel's preview, mixing them by the solved levels, is the
+    /// white-only preview of the same looks.
+    #[test]
+    fn per_emitter_images_mix_by_the_solved_levels() {
+        let (w, h, lights, planes) = planes();
+        let pixels = w * h;
+        let images = lights + 3;
+        let mut more = vec![0.0f32; 3 * images * pixels];
+        for ch in 0..3 {
+            for i in 0..images {
+                let src = if i < lights { i } else { 1 };
+                if i < lights || i - lights == ch {
+                    let from = (ch * lights + src) * pixels;
+                    let to = (ch * images + i) * pixels;
+                    more[to..to + pixels].copy_from_slice(&planes[from..from + pixels]);
+                }
+            }
+        }
+        let rgb = ColourModel::new(&visobjd_scene::profile::Profile::built_in("rgb").expect("rgb"));
+        let mut white = BasisImages::from_planes(w, h, lights, &planes, Precision::Single);
+        white.colours[1] = rgb.clone();
+        let mut split = BasisImages::from_planes(w, h, images, &more, Precision::Single);
+        split.lights = lights;
+        split.colours.truncate(lights);
+        split.colours[1] = rgb;
+        split.emitter_images = vec![None; lights];
+        split.emitter_images[1] = Some(lights);
+        let looks = looks(lights);
+        let refs: Vec<&Look> = looks.iter().collect();
+        let wts = weights(&split, &refs, 0.7);
+        for (name, kernel) in Kernel::all() {
+            let Some(kernel) = kernel else { continue };
+            let mut raw: Vec<Vec<f32>> = looks.iter().map(|_| vec![0.0; pixels * 3]).collect();
+            composite_with(kernel, &split, &wts, &mut raw, |rgb, out| {
+                for (i, px) in out.chunks_exact_mut(3).enumerate() {
+                    px.copy_from_slice(&[rgb[0][i], rgb[1][i], rgb[2][i]]);
+                }
+            });
+            for (k, look) in looks.iter().enumerate() {
+                let want = render_reference(&white, look, 0.7);
+                let reference = render_reference(&split, look, 0.7);
+                for (i, &v) in want.iter().enumerate() {
+                    for got in [raw[k][i], reference[i]] {
+                        assert!(
+                            (got - v).abs() <= 1e-4 * v.max(1.0),
+                            "{name} look {k} sample {i}: {got} vs {v}"
+                        );
+                    }
+                }
             }
         }
     }
@@ -1068,7 +1152,7 @@ mod tests {
         for precision in [Precision::Single, Precision::Half] {
             let basis = BasisImages::from_planes(w, h, lights, &planes, precision);
             for gain in [0.004, 0.05, 0.7] {
-                let wts = weights(&basis.colours, &refs, gain);
+                let wts = weights(&basis, &refs, gain);
                 for chunk in [CHUNK_LIGHTS, 3] {
                     let mut want = zeroed_outputs(looks.len(), w * h * 3);
                     composite_chunked(kernel, &basis, &wts, &mut want, chunk, encode_srgb8_planar);

@@ -67,6 +67,9 @@ pub enum OutputError {
 #[derive(Debug, Clone)]
 struct Desired {
     look: Arc<Look>,
+    /// Slot levels that stand for the look (`Output::set_frame`: capture shooting one
+    /// emitter alone, which no look asks for); `None`: the look's own.
+    frame: Option<Arc<Frame>>,
     /// Bumped by every `set_look`, so the clock sees a new target even if equal.
     generation: u64,
     fade: Duration,
@@ -232,6 +235,7 @@ impl Output {
         let initial = Arc::new(initial);
         let (desired, rx) = watch::channel(Desired {
             look: initial.clone(),
+            frame: None,
             generation: 0,
             fade: Duration::ZERO,
             since: now,
@@ -303,8 +307,23 @@ impl Output {
         let look = Arc::new(look);
         self.desired.send_modify(|d| {
             d.look = look;
+            d.frame = None;
             d.generation += 1;
             d.fade = fade;
+            d.since = Instant::now();
+        });
+    }
+
+    /// Puts `frame` (unmastered slot levels of this output's patch, as
+    /// [`Patch::emitter_alone`] makes them) on the wire at once, standing for `look`
+    /// until the next [`Output::set_look`]: what capture uses to light one emitter alone.
+    pub fn set_frame(&self, look: Look, frame: Frame) {
+        let (look, frame) = (Arc::new(look), Arc::new(frame));
+        self.desired.send_modify(|d| {
+            d.look = look;
+            d.frame = Some(frame);
+            d.generation += 1;
+            d.fade = Duration::ZERO;
             d.since = Instant::now();
         });
     }
@@ -696,7 +715,10 @@ impl Clock {
         let d = self.rx.borrow_and_update().clone();
         if d.generation != self.generation {
             self.from = self.levels_at(now);
-            self.target = self.patch.unmastered(&d.look);
+            self.target = match &d.frame {
+                Some(f) => (**f).clone(),
+                None => self.patch.unmastered(&d.look),
+            };
             self.fade_start = d.since;
             self.fade = d.fade;
             self.generation = d.generation;

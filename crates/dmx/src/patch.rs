@@ -205,6 +205,32 @@ impl Patch {
         frame
     }
 
+    /// The slot levels of `look` at master 1 with light `light`'s additive emitter
+    /// `emitter` (slot order) alone at full and its other emitters at 0, its dimmer (if it
+    /// has one) at full: how capture shoots one emitter's basis image.
+    pub fn emitter_alone(&self, look: &Look, light: usize, emitter: usize) -> Frame {
+        let mut frame = self.unmastered(look);
+        if let Some(placed) = self.lights.get(light) {
+            let base = placed.universe * SLOTS;
+            let (mut at, mut k) = (placed.offset, 0);
+            for &slot in &placed.slots {
+                let v = if slot.is_emitter() {
+                    k += 1;
+                    Some(if k - 1 == emitter { 1.0 } else { 0.0 })
+                } else {
+                    matches!(slot, Slot::Intensity | Slot::Intensity16).then_some(1.0)
+                };
+                if let Some(v) = v
+                    && at < SLOTS
+                {
+                    frame.levels[base + at] = v;
+                }
+                at += slot.width();
+            }
+        }
+        frame
+    }
+
     /// `frame` (unmastered levels) with the grand master applied to the slots that carry
     /// intensity.
     pub fn mastered(&self, frame: &Frame, master: f32) -> Frame {
@@ -290,14 +316,31 @@ impl Patch {
     /// dimmer), the inverse of [`Patch::unmastered`] then [`Patch::quantise`] at master 1:
     /// what a simulated camera renders the rig with.
     pub fn multipliers(&self, bytes: &[[u8; SLOTS]]) -> Vec<[f32; 3]> {
+        self.multipliers_as(bytes, &[])
+    }
+
+    /// [`Patch::multipliers`] of a rig whose emitters are not what the profiles say: light
+    /// `i`'s emitter levels make the light of `real[i]` (its fixture as it is; `None` or
+    /// missing: as its profile says), shown relative to the profile's white, which is what
+    /// its white basis image was captured at. A simulated camera's truth.
+    pub fn multipliers_as(
+        &self,
+        bytes: &[[u8; SLOTS]],
+        real: &[Option<ColourModel>],
+    ) -> Vec<[f32; 3]> {
         self.lights
             .iter()
-            .map(|light| {
+            .enumerate()
+            .map(|(i, light)| {
                 let (dimmer, colour) = read(light, bytes);
+                let model = real
+                    .get(i)
+                    .and_then(Option::as_ref)
+                    .unwrap_or(&light.colour);
                 let full = match colour {
                     Read::Emitters(levels) => light
                         .colour
-                        .relative(light.colour.reached(&levels))
+                        .relative(model.reached(&levels))
                         .map(|v| v as f32),
                     Read::Linear(c) => c,
                 };

@@ -207,7 +207,7 @@ fn mean_delta_e_lanes(a: &[f32], b: &[f32]) -> f32 {
 /// Renders looks at proxy size and converts to Lab: what distances are measured on. The
 /// layout is the compositor's: per strip of [`STRIP`] pixels, the strip's L, a and b planes.
 pub fn lab_proxies(proxy: &BasisImages, looks: &[&Look], gain: f32) -> Vec<Vec<f32>> {
-    let w = weights(&proxy.colours, looks, gain);
+    let w = weights(proxy, looks, gain);
     let mut outs = zeroed_outputs(looks.len(), proxy.pixels() * 3);
     composite_with(Kernel::detect(), proxy, &w, &mut outs, linear_to_lab_planar);
     outs

@@ -107,6 +107,10 @@ pub struct LightFile {
     pub universe: u16,
     /// DMX start address.
     pub address: u16,
+    /// Per-emitter basis images (`visobjd capture --emitters`), by emitter name: the stage
+    /// lit by that emitter alone at full, so the preview mixes what the camera saw.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub emitter_basis: BTreeMap<String, String>,
 }
 
 impl SceneFile {
@@ -141,6 +145,10 @@ pub struct Light {
     pub universe: u16,
     /// DMX start address 1..=512.
     pub address: u16,
+    /// One basis image per additive emitter of its profile, in slot order (each emitter
+    /// alone at full), resolved against the scene folder; empty for a light captured at
+    /// white only, whose colours are previewed from its white image and colour model.
+    pub emitter_basis: Vec<PathBuf>,
 }
 
 /// A light group ("system"): sampling assigns one value per group by default.
@@ -313,6 +321,7 @@ impl Scene {
                     l.channel, l.basis
                 ))
             })?;
+            let emitter_basis = emitter_basis(l, &profiles[profile]).map_err(invalid)?;
             groups[group].lights.push(i);
             lights.push(Light {
                 channel: l.channel,
@@ -325,6 +334,7 @@ impl Scene {
                 profile,
                 universe: l.universe,
                 address: l.address,
+                emitter_basis: emitter_basis.into_iter().map(|p| dir.join(p)).collect(),
             });
         }
         // A declared group no light uses would be an empty sampling unit: drop it.
@@ -375,6 +385,53 @@ impl Scene {
             _ => "no channels".into(),
         }
     }
+}
+
+/// A light's `emitter_basis` in its profile's emitter order: none, or one safe relative
+/// path for every emitter the colour model mixes (a partial set could not preview a mix).
+fn emitter_basis<'a>(l: &'a LightFile, profile: &Profile) -> Result<Vec<&'a Path>, String> {
+    if l.emitter_basis.is_empty() {
+        return Ok(Vec::new());
+    }
+    let names: Vec<&str> = profile
+        .emitters
+        .iter()
+        .take(emitter::MAX_EMITTERS)
+        .map(|e| e.name.as_str())
+        .collect();
+    if let Some(extra) = l
+        .emitter_basis
+        .keys()
+        .find(|k| !names.contains(&k.as_str()))
+    {
+        return Err(format!(
+            "light {}: emitter_basis `{extra}` is not an emitter of profile `{}` ({})",
+            l.channel,
+            profile.name,
+            if names.is_empty() {
+                "it has none".to_string()
+            } else {
+                names.join(", ")
+            }
+        ));
+    }
+    names
+        .iter()
+        .map(|n| {
+            let p = l.emitter_basis.get(*n).ok_or_else(|| {
+                format!(
+                    "light {}: emitter_basis has no image for emitter `{n}` (give one per emitter, or none)",
+                    l.channel
+                )
+            })?;
+            safe_relative(p).ok_or_else(|| {
+                format!(
+                    "light {}: emitter_basis `{p}` must be a relative path inside the scene folder",
+                    l.channel
+                )
+            })
+        })
+        .collect()
 }
 
 /// `p` as a path that cannot leave its folder (no root, no `..`), or None.
@@ -440,5 +497,47 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("unknown field `colour`"), "{e}");
+    }
+
+    #[test]
+    fn emitter_basis_names_every_emitter_or_none() {
+        let light = "[[light]]\nchannel = 4\nbasis = \"b.exr\"\nprofile = \"irgb\"\nuniverse = 1\naddress = 1\n";
+        let full = format!(
+            "{light}[light.emitter_basis]\nred = \"b-red.exr\"\ngreen = \"b-green.exr\"\nblue = \"b-blue.exr\"\n"
+        );
+        let scene = Scene::parse(Path::new("/s"), &full).expect("parses");
+        let want: Vec<PathBuf> = ["red", "green", "blue"]
+            .map(|n| PathBuf::from(format!("/s/b-{n}.exr")))
+            .to_vec();
+        assert_eq!(scene.lights[0].emitter_basis, want, "in slot order");
+        let file = SceneFile::parse(Path::new("/s/scene.toml"), &full).expect("file");
+        let again = Scene::parse(Path::new("/s"), &file.to_toml().expect("toml")).expect("again");
+        assert_eq!(
+            again.lights[0].emitter_basis, want,
+            "written back, it reads the same"
+        );
+        for (text, says) in [
+            (
+                format!("{light}[light.emitter_basis]\nred = \"r.exr\"\n"),
+                "light 4: emitter_basis has no image for emitter `green` (give one per emitter, or none)",
+            ),
+            (
+                format!(
+                    "{light}[light.emitter_basis]\nred = \"r.exr\"\ngreen = \"g.exr\"\nblue = \"b.exr\"\nwhite = \"w.exr\"\n"
+                ),
+                "light 4: emitter_basis `white` is not an emitter of profile `irgb` (red, green, blue)",
+            ),
+            (
+                format!(
+                    "{light}[light.emitter_basis]\nred = \"../r.exr\"\ngreen = \"g.exr\"\nblue = \"b.exr\"\n"
+                ),
+                "light 4: emitter_basis `../r.exr` must be a relative path inside the scene folder",
+            ),
+        ] {
+            let e = Scene::parse(Path::new("/s"), &text)
+                .unwrap_err()
+                .to_string();
+            assert_eq!(e, format!("/s/scene.toml: {says}"));
+        }
     }
 }
