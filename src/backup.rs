@@ -4,10 +4,11 @@
 //! stops (E1.31's priority merge, no home-made cluster).
 //!
 //! The main side is small: `/vo/backup/subscribe` (src/cmd/backup.rs) registers the
-//! connection and answers it with the state (`/vo/backup/state`); from then on every
-//! command the main accepted is forwarded on it, in the order the session took it
-//! ([`Pending`]). The backup side is [`mirror`]: it connects, subscribes, and runs what
-//! arrives through the same command path as any sender's message.
+//! connection and answers it with the whole session (`/vo/backup/state`); from then on
+//! every command the main accepted is forwarded on it, in the order the session took it
+//! ([`Pending`]), and a generate as the gallery it installed (`/vo/backup/gallery`). The
+//! backup side is [`mirror`]: it connects, subscribes, and runs what arrives through the
+//! same command path as any sender's message.
 
 use std::cell::RefCell;
 use std::net::SocketAddr;

@@ -18,8 +18,8 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use common::daemon::{
-    Daemon, Framing, Light, Osc, PATIENCE, STAGE, Setup, UNIVERSES, int, look_mismatch, string,
-    text,
+    Daemon, Framing, GENERATE_PATIENCE, Light, Osc, PATIENCE, STAGE, Setup, UNIVERSES, int,
+    look_mismatch, string, text,
 };
 use common::wire::parse_sacn;
 use rosc::OscMessage;
@@ -604,4 +604,37 @@ fn the_console_selection_reaches_a_late_backup_and_its_changes_keep_their_order(
         "the backup holding the main's constraints after the race",
         || selection_and_constraints(&mut backup) == want,
     );
+}
+
+#[test]
+fn a_pick_while_the_main_generates_is_the_same_pick_on_the_backup() {
+    let merger = Merger::start();
+    let (mut main, mut backup) = pair("racing", &merger);
+    main.add_objective("warm.png", "both");
+    main.generate();
+    let old = main.candidate(2, 1);
+    wait_mirrored(&mut main, &mut backup);
+
+    // A pick sent right behind a generate (a long one) picks from the gallery the main has
+    // when it takes the pick: the backup installs the new gallery where the main did, so
+    // it picks the same look.
+    main.ok("/vo/generate/count", vec![int(400)], "/vo/generate/count");
+    main.send("/vo/generate", vec![]);
+    main.send("/vo/pick", vec![int(2), int(1)]);
+    let mut got = main.collect("/vo/generated", GENERATE_PATIENCE, "/vo/generate");
+    if !got.iter().any(|m| m.addr == "/vo/picked") {
+        got.extend(main.collect("/vo/picked", PATIENCE, "/vo/pick"));
+    }
+    assert!(got.iter().all(|m| m.addr != "/vo/error"), "{got:?}");
+    // The main took the pick before the new gallery was installed if no entry of the new
+    // gallery is live (installing it clears the live entry); replies may come either way.
+    let during = main.status().entry == 0;
+    let picked = if during { old } else { main.candidate(2, 1) };
+    eprintln!(
+        "racing: the main took the pick {} the generate installed its gallery",
+        if during { "before" } else { "after" }
+    );
+    assert_eq!(main.live(), picked);
+    both_streams_show(&merger, &picked, "the pick made during the generate");
+    wait_mirrored(&mut main, &mut backup);
 }
