@@ -4,15 +4,15 @@
 //! stops (E1.31's priority merge, no home-made cluster).
 //!
 //! The main side is small: `/vo/backup/subscribe` (src/cmd/backup.rs) registers the
-//! connection and answers it with the state (`/vo/backup/state`); from then on every
-//! command the main accepted is forwarded on it, in the order the session took it
-//! ([`Pending`]). The backup side is [`mirror`]: it connects, subscribes, and runs what
-//! arrives through the same command path as any sender's message.
+//! connection and answers it with the whole session (`/vo/backup/state`); from then on
+//! every command the main accepted is forwarded on it, in the order the session took it
+//! ([`Pending`]), and a generate as the gallery it installed (`/vo/backup/gallery`). The
+//! backup side is [`mirror`]: it connects, subscribes, and runs what arrives through the
+//! same command path as any sender's message.
 
 use std::cell::RefCell;
 use std::net::SocketAddr;
 use std::sync::Arc;
-use std::sync::mpsc::RecvTimeoutError;
 use std::time::Duration;
 
 use rosc::{OscMessage, OscPacket};
@@ -111,8 +111,6 @@ const CONNECT: Duration = Duration::from_secs(3);
 /// A ping this often keeps the main from closing the quiet connection (its idle timeout
 /// is 60 s).
 const KEEPALIVE: Duration = Duration::from_secs(20);
-/// How long a mirrored generate may take before the backup moves on.
-const GENERATE_WAIT: Duration = Duration::from_secs(600);
 
 /// The backup's side: keeps a connection to `main`, subscribes, and applies what the main
 /// sends, reconnecting with backoff for ever (the task is aborted at shutdown).
@@ -216,8 +214,8 @@ fn messages(bytes: &[u8]) -> Vec<OscMessage> {
     }
 }
 
-/// Applies one message from the main through the command path; a generate is waited for,
-/// so the commands after it see its gallery as they did on the main.
+/// Applies one message from the main through the command path (a generate arrives as the
+/// gallery it installed, so nothing here waits for one).
 fn apply(engine: &Arc<Engine>, main: SocketAddr, m: OscMessage) {
     match m.addr.as_str() {
         "/vo/pong" => return,
@@ -227,31 +225,13 @@ fn apply(engine: &Arc<Engine>, main: SocketAddr, m: OscMessage) {
         }
         _ => {}
     }
-    let (peer, replies) = Peer::capture(main);
+    let (peer, _replies) = Peer::capture(main);
     let req = Request::new(m);
     if let Err(e) = crate::cmd::mirror(engine, &req, &peer) {
         tracing::error!(
             "backup: {} from the main failed here: {e}; this backup may differ from the main until it re-syncs",
             req.addr
         );
-        return;
-    }
-    if req.path() == "/vo/generate/seeded" {
-        loop {
-            match replies.recv_timeout(GENERATE_WAIT) {
-                Ok(r) if r.addr == "/vo/generated" => break,
-                Ok(r) if r.addr == "/vo/error" => {
-                    tracing::error!("backup: the main's generate failed here: {:?}", r.args);
-                    break;
-                }
-                Ok(_) => {}
-                Err(RecvTimeoutError::Timeout) => {
-                    tracing::error!("backup: the main's generate took over {GENERATE_WAIT:?} here");
-                    break;
-                }
-                Err(RecvTimeoutError::Disconnected) => break,
-            }
-        }
     }
 }
 

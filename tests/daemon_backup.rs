@@ -3,7 +3,10 @@
 //! measured on the wire by an E1.31 merging receiver written here (per universe the
 //! highest-priority source heard within 2.5 s wins), kill -9 of the main leaves the stage
 //! on the main's last look, a pick made just before the kill is what the backup shows, and
-//! a restarted main takes the stage back without a frame that differs.
+//! a restarted main takes the stage back without a frame that differs. A backup started
+//! (or restarted) after the main's generate takes the gallery, history and console
+//! selection with the state, so a pick or an undo on the main gives both daemons the same
+//! look on the wire.
 
 mod common;
 
@@ -15,9 +18,11 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use common::daemon::{
-    Daemon, Light, Osc, PATIENCE, STAGE, Setup, UNIVERSES, int, look_mismatch, string,
+    Daemon, Framing, GENERATE_PATIENCE, Light, Osc, PATIENCE, STAGE, Setup, UNIVERSES, int,
+    look_mismatch, string, text,
 };
 use common::wire::parse_sacn;
+use rosc::OscMessage;
 
 /// E1.31's network data loss time: a source unheard this long is dropped.
 const HOLD: Duration = Duration::from_millis(2500);
@@ -150,6 +155,22 @@ impl Merger {
         }
     }
 
+    /// The slots the source sending at `priority` last sent, per test universe, if it
+    /// sent all of them: one daemon's own stream, decoded before any merge.
+    fn sent_at(&self, priority: u8) -> Option<BTreeMap<u16, Vec<u8>>> {
+        let log = self.log.lock().expect("merge log");
+        UNIVERSES
+            .iter()
+            .map(|u| {
+                let src = log
+                    .sources
+                    .iter()
+                    .find(|((su, _), src)| su == u && src.priority == priority)?;
+                Some((*u, src.1.dmx.clone()))
+            })
+            .collect()
+    }
+
     /// Every merged frame of every universe since `from`.
     fn since(&self, from: Instant) -> Vec<(u16, Merged)> {
         let log = self.log.lock().expect("merge log");
@@ -184,13 +205,24 @@ fn all_from(priority: u8) -> impl Fn(&BTreeMap<u16, Merged>) -> bool {
 
 /// A main and its backup, both sending sACN to `merger`.
 fn pair(name: &str, merger: &Merger) -> (Daemon, Daemon) {
-    let main = Daemon::start_setup(
+    let main = main_alone(name, merger);
+    let backup = backup_of(name, &main, merger);
+    (main, backup)
+}
+
+/// A main sending sACN to `merger`, with no backup yet.
+fn main_alone(name: &str, merger: &Merger) -> Daemon {
+    Daemon::start_setup(
         &format!("{name}-main"),
         Setup {
             sacn_port: Some(merger.port),
             ..Setup::default()
         },
-    );
+    )
+}
+
+/// A backup of `main` sending sACN to `merger`, once it has taken the main's state.
+fn backup_of(name: &str, main: &Daemon, merger: &Merger) -> Daemon {
     let backup = Daemon::start_setup(
         &format!("{name}-backup"),
         Setup {
@@ -201,7 +233,16 @@ fn pair(name: &str, merger: &Merger) -> (Daemon, Daemon) {
         },
     );
     wait_following(&backup, 1);
-    (main, backup)
+    backup
+}
+
+/// Waits until `done` holds, polling, or fails naming `what`.
+fn eventually(what: &str, mut done: impl FnMut() -> bool) {
+    let end = Instant::now() + PATIENCE;
+    while !done() {
+        assert!(Instant::now() < end, "never: {what}");
+        std::thread::sleep(Duration::from_millis(10));
+    }
 }
 
 /// Waits until the backup has taken the main's state `times` times since it started.
@@ -300,9 +341,13 @@ fn the_backup_mirrors_the_main_and_refuses_changes_from_others() {
         "{why}"
     );
     backup.err("/vo/generate", vec![]);
-    let state = vec![string("{}"), string("{}"), string("{}")];
+    let state = vec![string("{}"), string("{}"), string("{}"), string("{}")];
     backup.err("/vo/backup/state", state.clone());
     let why = main.err("/vo/backup/state", state);
+    assert!(why.contains("only a backup"), "{why}");
+    let why = backup.err("/vo/backup/gallery", vec![string("{}")]);
+    assert!(why.contains("backup of"), "{why}");
+    let why = main.err("/vo/backup/gallery", vec![string("{}")]);
     assert!(why.contains("only a backup"), "{why}");
     assert_eq!(mirror_of(&mut backup), before);
 
@@ -418,4 +463,178 @@ fn a_pick_just_before_the_kill_is_what_the_backup_shows() {
     main.kill();
     let taken = merger.wait(HOLD * 3, "the backup taking over", all_from(BACKUP));
     assert_eq!(look_mismatch(&picked, &slots(&taken)), None);
+}
+
+/// Waits until the main's stream (at its priority) and the backup's (at its own) both
+/// decode, slot for slot, to `look`; returns the slots.
+fn both_streams_show(merger: &Merger, look: &[Light], what: &str) -> BTreeMap<u16, Vec<u8>> {
+    let mut shown = BTreeMap::new();
+    eventually(&format!("both streams showing {what}"), || {
+        match (merger.sent_at(MAIN), merger.sent_at(BACKUP)) {
+            (Some(main), Some(backup))
+                if main == backup && look_mismatch(look, &main).is_none() =>
+            {
+                shown = main;
+                true
+            }
+            _ => false,
+        }
+    });
+    shown
+}
+
+#[test]
+fn a_backup_started_after_the_generate_picks_undoes_and_takes_over_as_the_main() {
+    let merger = Merger::start();
+    let mut main = main_alone("late", &merger);
+    main.add_objective("warm.png", "both");
+    main.add_objective("cool.png", "color");
+    main.generate();
+    main.ok("/vo/pick", vec![int(1), int(1)], "/vo/picked");
+
+    // The backup subscribes after the generate and the pick: the state carries the
+    // gallery, the live entry and the undo history.
+    let mut backup = backup_of("late", &main, &merger);
+    wait_mirrored(&mut main, &mut backup);
+
+    // A pick on the main: both daemons send the picked look, each at its priority.
+    let k = main.gallery().len() as i32;
+    let picked = main.candidate(k, 1);
+    main.ok("/vo/pick", vec![int(k), int(1)], "/vo/picked");
+    both_streams_show(&merger, &picked, "the picked look");
+    wait_mirrored(&mut main, &mut backup);
+
+    // Undo steps back over the pick made before the backup existed, redo comes back.
+    let first = main.candidate(1, 1);
+    main.ok("/vo/undo", vec![], "/vo/undone");
+    both_streams_show(&merger, &first, "the look undone to");
+    main.ok("/vo/redo", vec![], "/vo/redone");
+    both_streams_show(&merger, &picked, "the look redone to");
+
+    // The backup restarted after another generate takes the new gallery the same way.
+    backup.kill();
+    main.generate();
+    backup.restart();
+    wait_following(&backup, 1);
+    wait_mirrored(&mut main, &mut backup);
+    let k = main.gallery().len() as i32;
+    let m = main.gallery()[k as usize - 1];
+    let picked = main.candidate(k, m);
+    main.ok("/vo/pick", vec![int(k), int(m)], "/vo/picked");
+    let last = both_streams_show(&merger, &picked, "the pick after the backup's restart");
+
+    // kill -9 of the main: after the hold the merged wire shows the backup's picked look.
+    let killed = Instant::now();
+    main.kill();
+    let taken = merger.wait(HOLD * 3, "the backup taking over", all_from(BACKUP));
+    eprintln!(
+        "late backup: its look was on the merged wire {:.3} s after kill -9",
+        (taken.values().map(|f| f.at).min().expect("universes") - killed).as_secs_f32()
+    );
+    assert_eq!(slots(&taken), last, "the backup's look, slot for slot");
+    assert_eq!(look_mismatch(&picked, &slots(&taken)), None);
+}
+
+/// Eos's selection report (`/eos/out/active/chan`), sent to the main.
+fn select(console: &mut impl Osc, text: &str) {
+    console.send("/eos/out/active/chan", vec![string(text)]);
+}
+
+/// What the console selection and the constraints are on `d`.
+fn selection_and_constraints(d: &mut Daemon) -> (OscMessage, Vec<OscMessage>) {
+    let selection = d.ok("/vo/console/selection", vec![], "/vo/console/selection");
+    (
+        selection,
+        d.call("/vo/constraints", vec![], "/vo/constraints/end"),
+    )
+}
+
+#[test]
+fn the_console_selection_reaches_a_late_backup_and_its_changes_keep_their_order() {
+    let merger = Merger::start();
+    let mut main = main_alone("selection", &merger);
+    let mut console = main.client();
+    select(&mut console, "3 + 5 [62]");
+    assert_eq!(console.fence(), Vec::new());
+
+    // The selection was reported before the backup existed: it comes with the state, so
+    // locking it on the main locks the same lights on the backup.
+    let mut backup = backup_of("selection", &main, &merger);
+    main.ok(
+        "/vo/console/selection/lock",
+        vec![int(1)],
+        "/vo/console/selection/lock",
+    );
+    let want = selection_and_constraints(&mut main);
+    assert!(
+        want.1
+            .iter()
+            .any(|m| m.args.first().map(text) == Some("/vo/light/5/lock".into())),
+        "{want:?}"
+    );
+    eventually("the backup holding the main's selection and locks", || {
+        selection_and_constraints(&mut backup) == want
+    });
+
+    // The console changes its selection while a tablet locks and keys it, concurrently:
+    // the backup applies the selections, locks and keys in the main's order, so it ends
+    // with the main's constraints.
+    let mut tablet = main.tcp(Framing::LengthPrefix);
+    let eos = std::thread::spawn(move || {
+        for i in 0..300 {
+            select(
+                &mut console,
+                &format!("{} + {} [50]", 1 + i % 6, 1 + (i * 7 + 3) % 6),
+            );
+        }
+        assert_eq!(console.fence(), Vec::new());
+    });
+    for i in 0..150 {
+        let (addr, on) = if i % 3 == 0 {
+            ("/vo/console/selection/key", i % 2)
+        } else {
+            ("/vo/console/selection/lock", (i / 3) % 2)
+        };
+        // Every selection has lights, so neither is refused.
+        tablet.ok(addr, vec![int(on)], addr);
+    }
+    eos.join().expect("the console thread");
+    let want = selection_and_constraints(&mut main);
+    eventually(
+        "the backup holding the main's constraints after the race",
+        || selection_and_constraints(&mut backup) == want,
+    );
+}
+
+#[test]
+fn a_pick_while_the_main_generates_is_the_same_pick_on_the_backup() {
+    let merger = Merger::start();
+    let (mut main, mut backup) = pair("racing", &merger);
+    main.add_objective("warm.png", "both");
+    main.generate();
+    let old = main.candidate(2, 1);
+    wait_mirrored(&mut main, &mut backup);
+
+    // A pick sent right behind a generate (a long one) picks from the gallery the main has
+    // when it takes the pick: the backup installs the new gallery where the main did, so
+    // it picks the same look.
+    main.ok("/vo/generate/count", vec![int(400)], "/vo/generate/count");
+    main.send("/vo/generate", vec![]);
+    main.send("/vo/pick", vec![int(2), int(1)]);
+    let mut got = main.collect("/vo/generated", GENERATE_PATIENCE, "/vo/generate");
+    if !got.iter().any(|m| m.addr == "/vo/picked") {
+        got.extend(main.collect("/vo/picked", PATIENCE, "/vo/pick"));
+    }
+    assert!(got.iter().all(|m| m.addr != "/vo/error"), "{got:?}");
+    // The main took the pick before the new gallery was installed if no entry of the new
+    // gallery is live (installing it clears the live entry); replies may come either way.
+    let during = main.status().entry == 0;
+    let picked = if during { old } else { main.candidate(2, 1) };
+    eprintln!(
+        "racing: the main took the pick {} the generate installed its gallery",
+        if during { "before" } else { "after" }
+    );
+    assert_eq!(main.live(), picked);
+    both_streams_show(&merger, &picked, "the pick made during the generate");
+    wait_mirrored(&mut main, &mut backup);
 }

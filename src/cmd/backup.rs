@@ -1,5 +1,6 @@
 //! `/vo/backup/subscribe` (a backup asks its main for the state and the commands it
-//! accepts) and `/vo/backup/state` (the state, applied by a backup). See src/backup.rs.
+//! accepts), `/vo/backup/state` (the state, applied by a backup) and `/vo/backup/gallery`
+//! (a gallery the main's generate installed, applied by a backup). See src/backup.rs.
 
 use std::sync::Arc;
 
@@ -12,8 +13,11 @@ use crate::osc::args::Request;
 
 pub enum Cmd {
     Subscribe,
-    /// The main's `session.json`, `live.json` and `looks.json`, as JSON text.
-    State([String; 3]),
+    /// The main's `session.json`, `live.json`, `looks.json` and what its session holds
+    /// besides (gallery, history, console selection), as JSON text.
+    State([String; 4]),
+    /// The gallery a generate installed on the main, as JSON text.
+    Gallery(String),
 }
 
 impl Cmd {
@@ -21,22 +25,23 @@ impl Cmd {
         Ok(Some(if req.matches("/vo/backup/subscribe").is_some() {
             Cmd::Subscribe
         } else if req.matches("/vo/backup/state").is_some() {
-            let part = |i: usize, what: &str| -> Result<String, String> {
-                Ok(args::string(args::required(&req.args, i, what)?, what)?.to_string())
-            };
             Cmd::State([
-                part(0, "session")?,
-                part(1, "live look")?,
-                part(2, "looks")?,
+                part(req, 0, "session")?,
+                part(req, 1, "live look")?,
+                part(req, 2, "looks")?,
+                part(req, 3, "working state")?,
             ])
+        } else if req.matches("/vo/backup/gallery").is_some() {
+            Cmd::Gallery(part(req, 0, "gallery")?)
         } else {
             return Ok(None);
         }))
     }
 
-    /// A state replaces the session; a subscription changes nothing a backup mirrors.
+    /// A state or gallery changes the session; a subscription changes nothing a backup
+    /// mirrors.
     pub fn changes_state(&self) -> bool {
-        matches!(self, Cmd::State(_))
+        !matches!(self, Cmd::Subscribe)
     }
 
     pub fn apply(self, e: &Arc<Engine>, peer: &Peer) -> Result<Vec<OscMessage>, String> {
@@ -46,15 +51,31 @@ impl Cmd {
                 Ok(Vec::new())
             }
             Cmd::State(parts) => {
-                if e.main().is_none() {
-                    return Err(
-                        "only a backup takes a state, from its main: this daemon has no [backup]"
-                            .into(),
-                    );
-                }
+                only_a_backup(e, "state")?;
                 e.install_state(&parts)?;
                 Ok(Vec::new())
             }
+            Cmd::Gallery(text) => {
+                only_a_backup(e, "gallery")?;
+                e.install_gallery(&text)?;
+                Ok(Vec::new())
+            }
         }
+    }
+}
+
+/// Argument `i`, a JSON text, named `what` in errors.
+fn part(req: &Request, i: usize, what: &str) -> Result<String, String> {
+    Ok(args::string(args::required(&req.args, i, what)?, what)?.to_string())
+}
+
+/// Err unless this daemon is a backup (which takes `what` only from its main: `cmd::run`
+/// refuses changes from anyone else).
+fn only_a_backup(e: &Engine, what: &str) -> Result<(), String> {
+    match e.main() {
+        Some(_) => Ok(()),
+        None => Err(format!(
+            "only a backup takes a {what}, from its main: this daemon has no [backup]"
+        )),
     }
 }

@@ -149,7 +149,7 @@ impl Command {
     }
 
     /// Whether the command itself is forwarded to backups once accepted. A generate is
-    /// forwarded by the engine instead, with the seed it chose (`/vo/generate/seeded`);
+    /// forwarded by the engine instead, as the gallery it installs (`/vo/backup/gallery`);
     /// the backup's own messages are not forwarded.
     fn forwarded(&self) -> bool {
         self.changes_state()

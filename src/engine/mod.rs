@@ -179,9 +179,9 @@ impl Engine {
     ) -> Result<Vec<OscMessage>, String> {
         let mut s = self.session();
         let outcome = change(&mut s)?;
-        if outcome.show != Show::Nothing || outcome.persist != Persist::No {
-            self.forward_pending();
-        }
+        // Whatever the outcome shows or saves: a change that does neither (the console
+        // selection) reaches the backups in the order the session took it too.
+        self.forward_pending();
         match outcome.show {
             Show::Nothing => {}
             Show::Look(fade_s) => self.with_output(|o| o.set_look(s.live.clone(), fade_s)),
@@ -242,9 +242,25 @@ impl Engine {
     /// connection closed or fell behind (its queue overflowed) is dropped: it re-syncs
     /// from the state when it subscribes again.
     pub fn forward(&self, m: &OscMessage) {
+        self.forward_with(|| Ok(m.clone()));
+    }
+
+    /// As [`Engine::forward`], building the message only if a backup follows (a gallery
+    /// costs its encoding); a message that cannot be built is logged and not sent.
+    fn forward_with(&self, build: impl FnOnce() -> Result<OscMessage, String>) {
         let mut backups = self.backups.lock().unwrap_or_else(|p| p.into_inner());
+        if backups.is_empty() {
+            return;
+        }
+        let m = match build() {
+            Ok(m) => m,
+            Err(e) => {
+                tracing::error!("{e}; the backups may differ from this main until they re-sync");
+                return;
+            }
+        };
         backups.retain(|b| {
-            let sent = b.reply(std::slice::from_ref(m));
+            let sent = b.reply(std::slice::from_ref(&m));
             if !sent {
                 tracing::warn!(
                     "backup {} dropped: its connection closed or fell behind; it re-syncs when it subscribes again",
@@ -289,18 +305,20 @@ impl Engine {
         Ok(())
     }
 
-    /// A backup takes its main's state (`/vo/backup/state`): the session is replaced, the
-    /// stage shows the main's live look at once, and the state files are written.
-    pub fn install_state(&self, parts: &[String; 3]) -> Result<(), String> {
+    /// A backup takes its main's state (`/vo/backup/state`): the session is replaced (its
+    /// gallery, history and console selection too), the stage shows the main's live look
+    /// at once, and the state files are written.
+    pub fn install_state(&self, parts: &[String; 4]) -> Result<(), String> {
         let _in_order = self.looks_io.lock().unwrap_or_else(|p| p.into_inner());
         let (count, clusters, fade_s) = self.defaults;
         let scene = &self.stage.scene;
+        let fresh = Session::new(scene, count, clusters, fade_s);
+        let (mut taken, lost) = persist::from_state(scene, parts, fresh)?;
+        for what in lost {
+            tracing::error!("backup: the main's state: not taken: {what}");
+        }
+        taken.gallery = taken.gallery.map(|g| self.received_gallery(g));
         self.commit(|s| {
-            let fresh = Session::new(scene, count, clusters, fade_s);
-            let (taken, lost) = persist::from_state(scene, parts, fresh)?;
-            for what in lost {
-                tracing::error!("backup: the main's state: not taken: {what}");
-            }
             *s = taken;
             Ok(Outcome::replies(Vec::new()).show_look(0.0).saved().pushed())
         })?;
@@ -309,6 +327,32 @@ impl Engine {
         self.files
             .save_looks(&looks)
             .map_err(|e| format!("cannot write the saved looks in the state folder: {e}"))
+    }
+
+    /// A backup takes the gallery its main's generate installed (`/vo/backup/gallery`),
+    /// at the same point of the command order as the main installed it.
+    pub fn install_gallery(&self, text: &str) -> Result<(), String> {
+        let gallery = self.received_gallery(persist::gallery_from_json(&self.stage.scene, text)?);
+        self.commit(|s| {
+            s.gallery = Some(gallery);
+            s.entry = None;
+            Ok(Outcome::replies(Vec::new()).pushed())
+        })
+        .map(drop)
+    }
+
+    /// A gallery from the main made this daemon's: the representatives' thumbnails (the
+    /// web gallery's) rendered here, with the session unlocked, and a serial of this run.
+    fn received_gallery(&self, mut g: Gallery) -> Gallery {
+        let reps: Vec<&Look> = g
+            .generation
+            .entries
+            .iter()
+            .filter_map(|members| g.generation.candidates.get(*members.first()?))
+            .collect();
+        g.generation.thumbnails = self.stage.thumbnails(&reps).into();
+        g.serial = self.generates.fetch_add(1, Ordering::SeqCst) + 1;
+        g
     }
 
     /// Runs `f` on the console input, if one is configured and still running.
@@ -416,7 +460,7 @@ impl Engine {
 
     /// Starts a generate on its own thread, with `seed` or the session's seed setting; the
     /// reply (`/vo/generated`) goes to `peer` when it is done. Refused while another runs.
-    /// Backups are sent `/vo/generate/seeded` with the seed it draws with.
+    /// Backups are sent the gallery itself (`/vo/backup/gallery`) when it is installed.
     pub fn generate(self: &Arc<Self>, peer: &Peer, seed: Option<u64>) -> Result<(), String> {
         if self.generating.swap(true, Ordering::SeqCst) {
             return Err("a generate is already running; wait for /vo/generated".into());
@@ -436,7 +480,6 @@ impl Engine {
             None if s.seed == 0 => u64::from(rand::random::<u32>() >> 1).max(1),
             None => s.seed,
         };
-        self.forward(&msg("/vo/generate/seeded", vec![OscType::Int(seed as i32)]));
         let serial = self.generates.fetch_add(1, Ordering::SeqCst) + 1;
         let mut started_msgs = vec![msg("/vo/progress", vec![OscType::Float(0.0)])];
         started_msgs.extend(self.feedback(&s));
@@ -494,6 +537,11 @@ impl Engine {
                 ],
             );
             let mut s = engine.session();
+            // Under the lock: the backups install it between the same two commands.
+            engine.forward_with(|| {
+                let text = persist::gallery_json(&engine.stage.scene, &generation, seed)?;
+                Ok(msg("/vo/backup/gallery", vec![OscType::String(text)]))
+            });
             s.gallery = Some(Gallery {
                 generation,
                 seed,

@@ -10,6 +10,8 @@ use visobjd_method::sampler::Constraints;
 use visobjd_scene::Scene;
 use visobjd_scene::look::{Look, LookFile};
 
+use serde::{Deserialize, Serialize};
+
 use super::rules::Rules;
 
 /// Base looks kept for undo (docs/osc.md; at least 32 were asked for).
@@ -57,7 +59,8 @@ impl Gallery {
 
 /// What a change of the base look came from, so fader moves coalesce into one undo step
 /// and following the console knows when to stop.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum Change {
     /// Pick, next, prev, recall: one undo step each; following the console stops.
     Step,
@@ -209,6 +212,23 @@ impl Session {
         self.entry = None;
         self.following = false;
         self.last_change = Some(Change::Step);
+    }
+
+    /// The undo and redo stacks (oldest first) and what the last base change came from:
+    /// what a backup takes with its main's state, so undo, redo and fader coalescing go
+    /// on there as on the main.
+    pub fn history(&self) -> (&[Look], &[Look], Option<Change>) {
+        (&self.undo, &self.redo, self.last_change)
+    }
+
+    /// Replaces the history with a main's (see [`Session::history`]); at most [`HISTORY`]
+    /// undo steps are kept, the newest.
+    pub fn set_history(&mut self, mut undo: Vec<Look>, mut redo: Vec<Look>, last: Option<Change>) {
+        undo.drain(..undo.len().saturating_sub(HISTORY));
+        redo.drain(..redo.len().saturating_sub(HISTORY));
+        self.undo = undo;
+        self.redo = redo;
+        self.last_change = last;
     }
 
     /// The objective with `id`, as an index.
