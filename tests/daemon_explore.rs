@@ -251,3 +251,24 @@ fn status_line(d: &Daemon) -> String {
     let state = listen.collect("/vo/status/text", PATIENCE, "the status line");
     text(&state.last().expect("status text").args[0])
 }
+
+#[test]
+fn a_daemon_stopped_mid_drag_exits_and_keeps_the_last_region() {
+    let mut d = Daemon::start("explore-stop");
+    let id = d.add_objective("warm.png", "both");
+    start(&mut d);
+    let last = [0.3, 0.1, 0.8, 0.6];
+    d.ok(
+        &format!("/vo/objective/{id}/region"),
+        region_args(last),
+        "/vo/objective/region",
+    );
+    // No /vo/explore 0: the tablet vanished, then the daemon is stopped.
+    let status = d.terminate();
+    assert!(status.success(), "{status:?}\n{}", d.log_text());
+    d.restart();
+    let kept = region_of(&mut d, id);
+    for (got, want) in kept.iter().zip(last) {
+        assert!((got - want).abs() < 1e-6, "kept {kept:?}, sent {last:?}");
+    }
+}

@@ -364,6 +364,10 @@ impl Engine {
     /// Stream_Terminated packets per sACN universe) and writes the state still queued
     /// (called by [`crate::shutdown::finish`]).
     pub fn shutdown(&self) {
+        // A drag still on would keep its worker waiting for updates.
+        if let Err(e) = self.explore_stop() {
+            tracing::warn!("{e}");
+        }
         self.threads.join();
         let input = self.input.lock().unwrap_or_else(|p| p.into_inner()).take();
         if let Some(input) = input {
