@@ -4,8 +4,8 @@
 //! A `.tosc` file is zlib-compressed XML: `<lexml version='3'>` holding one root `GROUP`
 //! node; every node has `<properties>` (name, frame, colour, ...), `<values>` (`x`, `touch`,
 //! a label's `text`), `<messages>` (`<osc>` with triggers, a path and arguments made of
-//! `<partial>`s) and `<children>`. Three pages: objectives, gallery, looks
-//! (docs/touchosc.md).
+//! `<partial>`s) and `<children>`. Five pages: objectives (with the drag-to-explore pad),
+//! gallery, constraints, transfer, looks (docs/touchosc.md).
 
 use std::fmt::Write as _;
 use std::io::Write as _;
@@ -17,6 +17,10 @@ pub const ENTRY_BUTTONS: usize = 12;
 pub const LOOK_SLOTS: usize = 16;
 /// Reference-image buttons on the objectives page, at most.
 pub const MAX_REFERENCES: usize = 12;
+/// Groups on the constraints and transfer pages, at most (the scene's first ones).
+pub const MAX_GROUPS: usize = 8;
+/// Entries a transfer row offers (`/vo/transfer 1` ... `/vo/transfer 8`).
+pub const TRANSFER_ENTRIES: usize = 8;
 
 /// The layout's size: a 4:3 tablet in landscape.
 const WIDTH: i32 = 1024;
@@ -56,6 +60,15 @@ impl Partial {
         }
     }
 
+    fn constant_float(v: f32) -> Partial {
+        Partial {
+            kind: "CONSTANT",
+            conversion: "FLOAT",
+            value: v.to_string(),
+            scale: (0.0, 1.0),
+        }
+    }
+
     fn constant_int(i: usize) -> Partial {
         Partial {
             kind: "CONSTANT",
@@ -84,8 +97,9 @@ pub struct Message {
     pub send: bool,
     /// Sets the control when the daemon sends this address (feedback).
     pub receive: bool,
-    /// Which value triggers a send and on what: (`x`, `RISE`), (`x`, `ANY`), ...
-    pub trigger: (&'static str, &'static str),
+    /// Which values trigger a send and on what: (`x`, `RISE`), (`x`, `ANY`),
+    /// (`touch`, `ANY`), ...; any one of them sends.
+    pub triggers: Vec<(&'static str, &'static str)>,
     /// The arguments.
     pub arguments: Vec<Partial>,
 }
@@ -97,7 +111,7 @@ impl Message {
             path: path.to_string(),
             send: true,
             receive: false,
-            trigger: ("x", "RISE"),
+            triggers: vec![("x", "RISE")],
             arguments,
         }
     }
@@ -108,7 +122,7 @@ impl Message {
             path: path.to_string(),
             send: true,
             receive: true,
-            trigger: ("x", "ANY"),
+            triggers: vec![("x", "ANY")],
             arguments,
         }
     }
@@ -119,7 +133,7 @@ impl Message {
             path: path.to_string(),
             send: false,
             receive: true,
-            trigger: ("x", "ANY"),
+            triggers: vec![("x", "ANY")],
             arguments: vec![Partial::value(key, conversion, (0.0, 1.0))],
         }
     }
@@ -255,7 +269,7 @@ fn objectives_page(references: &[String]) -> Node {
     ));
     c.push(label(
         "region_title",
-        "Region: drag to aim it at half the stage",
+        "Region: drag to aim it and explore",
         [660, 8, 348, 32],
         16,
     ));
@@ -268,13 +282,22 @@ fn objectives_page(references: &[String]) -> Node {
         path: "/vo/objective/last/region".into(),
         send: true,
         receive: false,
-        trigger: ("x", "ANY"),
+        triggers: vec![("x", "ANY"), ("y", "ANY")],
         arguments: vec![
             Partial::value("x", "FLOAT", (0.0, 0.5)),
             Partial::value("y", "FLOAT", (0.5, 0.0)),
             Partial::value("x", "FLOAT", (0.5, 1.0)),
             Partial::value("y", "FLOAT", (1.0, 0.5)),
         ],
+    });
+    // Touching the pad explores: galleries stream while the finger moves (the touch value
+    // is 1 from touch-down to release).
+    pad.messages.push(Message {
+        path: "/vo/explore".into(),
+        send: true,
+        receive: false,
+        triggers: vec![("touch", "ANY")],
+        arguments: vec![Partial::value("touch", "INTEGER", (0.0, 1.0))],
     });
     c.push(pad);
     c.extend(button(
@@ -331,7 +354,7 @@ fn gallery_page() -> Node {
         let (col, row) = (i % 4, i / 4);
         let mut pick = Message::press("/vo/pick", vec![Partial::constant_int(k)]);
         // On release: the push that lights the live entry arrives after it and stays.
-        pick.trigger = ("x", "FALL");
+        pick.triggers = vec![("x", "FALL")];
         c.extend(button(
             &format!("entry_{k}"),
             &k.to_string(),
@@ -400,6 +423,159 @@ fn gallery_page() -> Node {
     page("gallery", "Gallery", c)
 }
 
+/// Stage halves and the centre, as pins and transfer regions offer them.
+const AREAS: [(&str, [f32; 4]); 5] = [
+    ("left half", [0.0, 0.0, 0.5, 1.0]),
+    ("right half", [0.5, 0.0, 1.0, 1.0]),
+    ("top half", [0.0, 0.0, 1.0, 0.5]),
+    ("bottom half", [0.0, 0.5, 1.0, 1.0]),
+    ("centre", [0.25, 0.25, 0.75, 0.75]),
+];
+
+fn region_partials(r: [f32; 4]) -> Vec<Partial> {
+    r.into_iter().map(Partial::constant_float).collect()
+}
+
+/// A horizontal fader that sends on every move (the daemon's echo names the group, which a
+/// fader cannot match, so it does not listen).
+fn slider(name: &str, frame: [i32; 4], default: f32, path: &str, args: Vec<Partial>) -> Node {
+    let mut f = fader(
+        name,
+        frame,
+        ACCENT,
+        default,
+        vec![Message {
+            path: path.to_string(),
+            send: true,
+            receive: false,
+            triggers: vec![("x", "ANY")],
+            arguments: args,
+        }],
+    );
+    f.props.push(('i', "orientation", "1".into()));
+    f
+}
+
+/// The constraints page: per group (the scene's first [`MAX_GROUPS`]) its exclusion, its
+/// saturation ceiling and its brightness relative to the first group; pins on stage areas.
+fn constraints_page(groups: &[String]) -> Node {
+    let mut c = vec![
+        label("exclude_title", "exclude", [170, 8, 250, 32], 16),
+        label("saturation_title", "saturation max", [430, 8, 250, 32], 16),
+    ];
+    if let Some(first) = groups.first() {
+        c.push(label(
+            "ratio_title",
+            &format!("ratio to {first} (0-2, 0: none)"),
+            [700, 8, 308, 32],
+            16,
+        ));
+    }
+    for (i, g) in groups.iter().take(MAX_GROUPS).enumerate() {
+        let y = 48 + i as i32 * 60;
+        c.push(label(&format!("group_{i}"), g, [16, y, 150, 52], 16));
+        for (j, mode) in ["ignore", "off", "none"].into_iter().enumerate() {
+            c.extend(button(
+                &format!("exclude_{i}_{mode}"),
+                mode,
+                [170 + j as i32 * 84, y, 80, 52],
+                if mode == "none" { NEUTRAL } else { DANGER },
+                vec![Message::press(
+                    &format!("/vo/group/{g}/exclude"),
+                    vec![Partial::constant_str(mode)],
+                )],
+            ));
+        }
+        c.push(slider(
+            &format!("saturation_{i}"),
+            [430, y, 250, 52],
+            1.0,
+            &format!("/vo/group/{g}/saturation"),
+            vec![
+                Partial::constant_float(0.0),
+                Partial::value("x", "FLOAT", (0.0, 1.0)),
+            ],
+        ));
+        if i > 0 {
+            c.push(slider(
+                &format!("ratio_{i}"),
+                [700, y, 308, 52],
+                0.0,
+                &format!("/vo/group/{g}/ratio"),
+                vec![
+                    Partial::constant_str(&groups[0]),
+                    Partial::value("x", "FLOAT", (0.0, 2.0)),
+                ],
+            ));
+        }
+    }
+    let y = 48 + MAX_GROUPS as i32 * 60;
+    c.push(label(
+        "pins_title",
+        "pin (keep as is)",
+        [16, y, 150, 52],
+        16,
+    ));
+    for (j, (name, r)) in AREAS.into_iter().enumerate() {
+        c.extend(button(
+            &format!("pin_{j}"),
+            name,
+            [170 + j as i32 * 130, y, 122, 52],
+            LOOK,
+            vec![Message::press("/vo/pin/add", region_partials(r))],
+        ));
+    }
+    c.push(status_line());
+    page("constraints", "Constraints", c)
+}
+
+/// The transfer page: a row per group and per stage half, a button per gallery entry:
+/// the row's lights take that entry's values (`/vo/transfer k group NAME`, `... region`).
+fn transfer_page(groups: &[String]) -> Node {
+    let mut c = vec![label(
+        "transfer_title",
+        "Transfer from entry (onto the stage, with the fade)",
+        [16, 8, 992, 32],
+        18,
+    )];
+    let rows = groups
+        .iter()
+        .take(MAX_GROUPS)
+        .map(|g| {
+            (
+                g.clone(),
+                vec![Partial::constant_str("group"), Partial::constant_str(g)],
+            )
+        })
+        .chain(AREAS[..2].iter().map(|(name, r)| {
+            let mut args = vec![Partial::constant_str("region")];
+            args.extend(region_partials(*r));
+            (name.to_string(), args)
+        }));
+    for (i, (name, args)) in rows.enumerate() {
+        let y = 48 + i as i32 * 58;
+        c.push(label(
+            &format!("transfer_row_{i}"),
+            &name,
+            [16, y, 150, 50],
+            16,
+        ));
+        for k in 1..=TRANSFER_ENTRIES {
+            let mut a = vec![Partial::constant_int(k)];
+            a.extend(args.iter().cloned());
+            c.extend(button(
+                &format!("transfer_{i}_{k}"),
+                &k.to_string(),
+                [170 + (k as i32 - 1) * 104, y, 96, 50],
+                ENTRY,
+                vec![Message::press("/vo/transfer", a)],
+            ));
+        }
+    }
+    c.push(status_line());
+    page("transfer", "Transfer", c)
+}
+
 /// The looks page: save the live look to a slot, recall a slot.
 fn looks_page() -> Node {
     let mut c = vec![
@@ -451,15 +627,22 @@ fn page(name: &str, tab: &str, children: Vec<Node>) -> Node {
     g
 }
 
-/// The whole layout's XML; `references` are the image names the objectives page offers.
-pub fn layout_xml(references: &[String]) -> String {
+/// The whole layout's XML; `references` are the image names the objectives page offers,
+/// `groups` the scene's groups the constraints and transfer pages offer.
+pub fn layout_xml(references: &[String], groups: &[String]) -> String {
     let mut pager = Node::new("PAGER", "pages", [0, 0, WIDTH, HEIGHT], BACKGROUND);
     pager.props.extend([
         ('b', "tabbar", "1".into()),
         ('i', "tabbarSize", TABS.to_string()),
     ]);
     pager.values.push(("page", "1".into()));
-    pager.children = vec![objectives_page(references), gallery_page(), looks_page()];
+    pager.children = vec![
+        objectives_page(references),
+        gallery_page(),
+        constraints_page(groups),
+        transfer_page(groups),
+        looks_page(),
+    ];
     let root = Node::group("visobjd", [0, 0, WIDTH, HEIGHT], vec![pager]);
     let mut out = String::from("<?xml version='1.0' encoding='UTF-8'?><lexml version='3'>");
     let mut ids = 0u32;
@@ -469,9 +652,9 @@ pub fn layout_xml(references: &[String]) -> String {
 }
 
 /// The layout, zlib-compressed as TouchOSC reads it.
-pub fn layout_tosc(references: &[String]) -> std::io::Result<Vec<u8>> {
+pub fn layout_tosc(references: &[String], groups: &[String]) -> std::io::Result<Vec<u8>> {
     let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::default());
-    z.write_all(layout_xml(references).as_bytes())?;
+    z.write_all(layout_xml(references, groups).as_bytes())?;
     z.finish()
 }
 
@@ -555,12 +738,17 @@ fn write_node(out: &mut String, n: &Node, ids: &mut u32) {
         for m in &n.messages {
             let _ = write!(
                 out,
-                "<osc><enabled>1</enabled><send>{}</send><receive>{}</receive><feedback>0</feedback><connections>00001</connections><triggers><trigger><var>{}</var><condition>{}</condition></trigger></triggers><path>",
+                "<osc><enabled>1</enabled><send>{}</send><receive>{}</receive><feedback>0</feedback><connections>00001</connections><triggers>",
                 u8::from(m.send),
                 u8::from(m.receive),
-                m.trigger.0,
-                m.trigger.1
             );
+            for (var, condition) in &m.triggers {
+                let _ = write!(
+                    out,
+                    "<trigger><var>{var}</var><condition>{condition}</condition></trigger>"
+                );
+            }
+            out.push_str("</triggers><path>");
             write_partial(out, &Partial::constant_str(&m.path));
             out.push_str("</path><arguments>");
             for a in &m.arguments {
@@ -599,13 +787,31 @@ mod tests {
     #[test]
     fn regenerating_gives_the_same_layout() {
         let refs = vec!["sunset.png".to_string(), "noir.png".to_string()];
-        assert_eq!(layout_xml(&refs), layout_xml(&refs));
-        let xml = layout_xml(&refs);
+        let groups = vec!["front".to_string(), "back".to_string(), "side".to_string()];
+        assert_eq!(layout_xml(&refs, &groups), layout_xml(&refs, &groups));
+        let xml = layout_xml(&refs, &groups);
         assert!(xml.starts_with("<?xml version='1.0' encoding='UTF-8'?><lexml version='3'><node "));
         assert!(xml.contains("<![CDATA[sunset.png]]>"));
         assert_eq!(
             xml.matches("type='BUTTON'").count(),
-            2 + 3 + 2 + 1 + 1 + ENTRY_BUTTONS + 4 + 1 + 2 * LOOK_SLOTS
+            2 + 3
+                + 2
+                + 1
+                + 1
+                + ENTRY_BUTTONS
+                + 4
+                + 1
+                + 2 * LOOK_SLOTS
+                + 3 * 3
+                + AREAS.len()
+                + (3 + 2) * TRANSFER_ENTRIES
+        );
+        // A fader per group for saturation, one per group after the first for its ratio.
+        assert_eq!(xml.matches("type='FADER'").count(), 3 + 3 + 2);
+        assert!(xml.contains("<![CDATA[/vo/group/back/ratio]]>"));
+        assert!(
+            xml.contains("<var>touch</var>"),
+            "the pad explores on touch"
         );
     }
 

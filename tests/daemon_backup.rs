@@ -371,6 +371,26 @@ fn the_backup_mirrors_the_main_and_refuses_changes_from_others() {
 }
 
 #[test]
+fn an_explore_drag_reaches_the_backup_as_its_last_gallery() {
+    let merger = Merger::start();
+    let (mut main, mut backup) = pair("explore", &merger);
+    let id = main.add_objective("warm.png", "both");
+    main.ok("/vo/explore", vec![int(1)], "/vo/explore");
+    let path = format!("/vo/objective/{id}/region");
+    for i in 0..30 {
+        let t = i as f32 / 60.0;
+        let r = [t, 0.0, t + 0.5, 1.0].map(common::daemon::float).to_vec();
+        main.ok(&path, r, "/vo/objective/region");
+    }
+    main.ok("/vo/explore", vec![int(0)], "/vo/explore");
+    wait_mirrored(&mut main, &mut backup);
+    // A pick of the explored gallery is the same look on the backup.
+    main.ok("/vo/pick", vec![int(2), int(1)], "/vo/picked");
+    wait_mirrored(&mut main, &mut backup);
+    backup.err("/vo/explore", vec![int(1)]);
+}
+
+#[test]
 fn kill_9_leaves_the_mains_last_look_and_a_restarted_main_takes_it_back() {
     let merger = Merger::start();
     let (mut main, mut backup) = pair("failover", &merger);

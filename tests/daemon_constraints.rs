@@ -515,3 +515,41 @@ fn a_session_file_with_impossible_constraints_restores_the_rest() {
     );
     assert_eq!(r.args[0], int(6));
 }
+
+#[test]
+fn constraint_changes_are_pushed_to_subscribers() {
+    let mut d = Daemon::start("constraints-push");
+    let mut tablet = d.client();
+    let mut listen = d.client();
+    let port = i32::from(listen.port());
+    tablet.call("/vo/subscribe", vec![int(port)], "/vo/subscribed");
+    listen.fence();
+    let ch = common::daemon::STAGE[0].channel;
+    for (addr, args, echo) in [
+        ("/vo/group/side/key", vec![int(1)], "/vo/group/key"),
+        (
+            &*format!("/vo/light/{ch}/lock"),
+            vec![int(1)],
+            "/vo/light/lock",
+        ),
+        (
+            "/vo/group/side/exclude",
+            vec![string("off")],
+            "/vo/group/exclude",
+        ),
+        (
+            "/vo/group/side/saturation",
+            vec![float(0.2), float(0.8)],
+            "/vo/group/saturation",
+        ),
+    ] {
+        let reply = d.ok(addr, args, echo);
+        let pushed = listen.collect(echo, common::daemon::PATIENCE, addr);
+        assert_eq!(pushed.last(), Some(&reply), "{addr}: {pushed:?}");
+        listen.fence();
+    }
+    // A refused one pushes nothing.
+    d.err("/vo/group/nowhere/key", vec![int(1)]);
+    let after = listen.fence();
+    assert!(after.is_empty(), "{after:?}");
+}

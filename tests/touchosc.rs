@@ -20,6 +20,8 @@ struct Message {
     path: String,
     send: bool,
     receive: bool,
+    /// (value, condition) pairs that send it.
+    triggers: Vec<(String, String)>,
     args: Vec<OscType>,
 }
 
@@ -83,6 +85,14 @@ fn messages(tosc: &[u8]) -> (String, Vec<Message>) {
             path,
             send: text(osc, "send") == "1",
             receive: text(osc, "receive") == "1",
+            triggers: child(osc, "triggers")
+                .map(|t| {
+                    t.children()
+                        .filter(|c| c.has_tag_name("trigger"))
+                        .map(|c| (text(c, "var"), text(c, "condition")))
+                        .collect()
+                })
+                .unwrap_or_default(),
             args,
         });
     }
@@ -201,9 +211,9 @@ fn the_shipped_layout_is_what_the_generator_writes() {
 }
 
 #[test]
-fn the_layout_has_the_three_pages_and_their_controls() {
+fn the_layout_has_its_pages_and_their_controls() {
     let (xml, msgs) = messages(&shipped());
-    for page in ["Objectives", "Gallery", "Looks"] {
+    for page in ["Objectives", "Gallery", "Constraints", "Transfer", "Looks"] {
         assert!(xml.contains(&format!("<![CDATA[{page}]]>")), "page {page}");
     }
     let sends = |path: &str| {
@@ -216,7 +226,60 @@ fn the_layout_has_the_three_pages_and_their_controls() {
     let images = std::fs::read_dir(refs).expect("demo refs").count();
     assert_eq!(sends("/vo/objective/add").len(), images);
     assert_eq!(sends("/vo/objective/last/aspects").len(), 3);
-    assert_eq!(sends("/vo/objective/last/region")[0].args.len(), 4);
+    let region = sends("/vo/objective/last/region");
+    assert_eq!(region[0].args.len(), 4);
+    // The region pad explores while touched: 1 on touch-down, 0 on release, and sends the
+    // region whichever axis moves.
+    let explore = sends("/vo/explore");
+    assert_eq!(explore.len(), 1, "{explore:?}");
+    assert_eq!(explore[0].control, region[0].control);
+    assert_eq!(
+        explore[0].triggers,
+        [("touch".to_string(), "ANY".to_string())]
+    );
+    for axis in ["x", "y"] {
+        assert!(
+            region[0]
+                .triggers
+                .contains(&(axis.to_string(), "ANY".to_string())),
+            "{:?}",
+            region[0].triggers
+        );
+    }
+    // The demo's groups: exclusions, saturation and ratios, transfers; pins.
+    let demo = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/demo/scene.toml"),
+    )
+    .expect("the demo scene");
+    let first: String = demo
+        .split("[[group]]")
+        .nth(1)
+        .and_then(|g| {
+            g.lines()
+                .find_map(|l| l.strip_prefix("name = \"")?.strip_suffix('"'))
+        })
+        .expect("the demo's first group")
+        .to_string();
+    assert_eq!(sends(&format!("/vo/group/{first}/exclude")).len(), 3);
+    assert_eq!(sends(&format!("/vo/group/{first}/saturation")).len(), 1);
+    assert!(
+        msgs.iter()
+            .filter(|m| m.path.ends_with("/ratio"))
+            .all(|m| m.args[0] == OscType::String(first.clone()))
+    );
+    assert!(msgs.iter().any(|m| m.path.ends_with("/ratio")));
+    assert_eq!(sends("/vo/pin/add").len(), 5);
+    let transfers = sends("/vo/transfer");
+    assert!(
+        transfers
+            .iter()
+            .any(|m| m.args[1] == OscType::String("group".into()))
+    );
+    assert!(
+        transfers
+            .iter()
+            .any(|m| m.args[1] == OscType::String("region".into()))
+    );
     // Entries 1-12, each lit by its own push; looks 1-16 both ways.
     let picks: Vec<&OscType> = sends("/vo/pick").iter().map(|m| &m.args[0]).collect();
     assert_eq!(

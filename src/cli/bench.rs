@@ -3,6 +3,7 @@
 
 use std::net::UdpSocket;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
@@ -55,12 +56,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let written = write_big_scene(&dir)?;
     let rss_before = rss_bytes();
     let started = Instant::now();
-    let big = Stage::load(&dir, THUMB_WIDTH).context("loading the synthetic scene")?;
+    let big = Arc::new(Stage::load(&dir, THUMB_WIDTH).context("loading the synthetic scene")?);
     let load_s = started.elapsed().as_secs_f64();
     let rss = rss_bytes();
     let kept = big.proxy.bytes() + big.thumbs.bytes();
-    let demo = Stage::load(&args.scene, THUMB_WIDTH)
-        .with_context(|| format!("{}: cannot load", args.scene.display()))?;
+    let demo = Arc::new(
+        Stage::load(&args.scene, THUMB_WIDTH)
+            .with_context(|| format!("{}: cannot load", args.scene.display()))?,
+    );
     let objective = objective(&args.scene)?;
 
     // Compositor rows, to be set against the run's bound once it is known. Every kernel
@@ -160,6 +163,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "ms",
         period + 2.0,
     ));
+    let drag_s = if args.quick { 3.0 } else { 10.0 };
+    for (name, stage, scene, target) in [
+        ("44", &demo, args.scene.as_path(), 50.0),
+        ("267", &big, dir.as_path(), 20.0),
+    ] {
+        let d = drag::run(Arc::clone(stage), scene, &args.scene.join("refs"), drag_s)?;
+        rows.extend(d.rows(name, drag_s, target));
+    }
     drop(big);
     let _ = std::fs::remove_dir_all(&dir);
     bound = bound.max(flop_bound(kernel));
@@ -209,9 +220,22 @@ pub fn run(args: Args) -> anyhow::Result<()> {
          loop, plus loops at the start and the end); the median render's ratio beside them. \
          The others to their limit)"
     );
+    println!(
+        "(drag rows: a client sends /vo/explore 1, {} region updates a second for {drag_s} s, \
+         then /vo/explore 0, to a daemon in this process (OSC over UDP on loopback, sACN to a \
+         local socket); galleries are the /vo/generated pushes its subscription received, \
+         against the target; the lockstep client beside them sets the region and waits for \
+         each /vo/generate. The DMX gap is the largest interval between one universe's \
+         packets during the drag, against two periods; pings go every {} ms from another \
+         socket)",
+        drag::UPDATES_HZ,
+        drag::PING_EVERY.as_millis()
+    );
     println!("\n(the synthetic scene: {written} EXR files, {load_s:.2} s to load)");
     Ok(())
 }
+
+mod drag;
 
 /// One line of the report.
 struct Row {

@@ -11,6 +11,9 @@ pub struct Args {
     /// The references folder whose images get a button on the objectives page.
     #[arg(long, default_value = "scenes/demo/refs")]
     refs: PathBuf,
+    /// The scene folder whose groups get the constraints and transfer rows.
+    #[arg(long, default_value = "scenes/demo")]
+    scene: PathBuf,
     /// The .tosc file to write.
     #[arg(long)]
     out: PathBuf,
@@ -20,13 +23,18 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let refs = crate::touchosc::reference_images(&args.refs)
         .with_context(|| format!("--refs {}: cannot list it", args.refs.display()))?;
-    let bytes = crate::touchosc::layout_tosc(&refs).context("cannot compress the layout")?;
+    let scene = visobjd_scene::Scene::load(&args.scene)
+        .with_context(|| format!("--scene {}: cannot load it", args.scene.display()))?;
+    let groups: Vec<String> = scene.groups.iter().map(|g| g.name.clone()).collect();
+    let bytes =
+        crate::touchosc::layout_tosc(&refs, &groups).context("cannot compress the layout")?;
     std::fs::write(&args.out, bytes)
         .with_context(|| format!("--out {}: cannot write it", args.out.display()))?;
     let shown = refs.len().min(crate::touchosc::MAX_REFERENCES);
     println!(
-        "touchosc: {} reference buttons, {} entries, {} look slots -> {}",
+        "touchosc: {} reference buttons, {} groups, {} entries, {} look slots -> {}",
         shown,
+        groups.len().min(crate::touchosc::MAX_GROUPS),
         crate::touchosc::ENTRY_BUTTONS,
         crate::touchosc::LOOK_SLOTS,
         args.out.display()

@@ -286,7 +286,8 @@ impl Cmd {
                     return Ok(Outcome::replies(out));
                 }
             };
-            Ok(Outcome::reply(reply).saved())
+            // Another tablet's constraint controls follow.
+            Ok(Outcome::reply(reply).saved().echoed())
         })
     }
 }

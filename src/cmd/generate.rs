@@ -1,10 +1,11 @@
-//! `/vo/generate` and its settings.
+//! `/vo/generate`, its settings, and `/vo/explore` (galleries that follow a dragged
+//! region, src/engine/explore.rs).
 
 use std::sync::Arc;
 
 use rosc::OscMessage;
 
-use super::{int, int_arg};
+use super::{int, int_arg, switch_arg};
 use crate::engine::{Engine, Outcome, msg};
 use crate::osc::Peer;
 use crate::osc::args::Request;
@@ -15,6 +16,8 @@ pub enum Cmd {
     /// Generates once with this seed, leaving the seed setting alone (what a main sends
     /// its backups, so their galleries are the main's).
     Seeded(u64),
+    /// `/vo/explore 1|0`: galleries follow the region updates until explore is off.
+    Explore(bool),
     Set(Setting),
 }
 
@@ -31,6 +34,8 @@ impl Cmd {
             Cmd::Generate
         } else if req.matches("/vo/generate/seeded").is_some() {
             Cmd::Seeded(int_arg(req, 0, "seed", 1, i64::from(i32::MAX))? as u64)
+        } else if req.matches("/vo/explore").is_some() {
+            Cmd::Explore(switch_arg(req, "explore")?)
         } else if req.matches("/vo/generate/count").is_some() {
             Cmd::Set(Setting::Count(int_arg(req, 0, "count", 1, 1000)? as u32))
         } else if req.matches("/vo/generate/clusters").is_some() {
@@ -53,6 +58,21 @@ impl Cmd {
             Cmd::Seeded(seed) => {
                 e.generate(peer, Some(seed))?;
                 return Ok(Vec::new());
+            }
+            Cmd::Explore(on) => {
+                let reply = if on {
+                    let seed = e.explore_start()?;
+                    msg("/vo/explore", vec![int(1), int(seed as usize)])
+                } else {
+                    let (galleries, seed) = e.explore_stop()?;
+                    msg(
+                        "/vo/explore",
+                        vec![int(0), int(galleries as usize), int(seed as usize)],
+                    )
+                };
+                // Other tablets learn that the gallery follows someone's hand (or stopped).
+                e.notify(std::slice::from_ref(&reply));
+                return Ok(vec![reply]);
             }
             Cmd::Set(setting) => setting,
         };

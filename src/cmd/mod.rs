@@ -149,14 +149,16 @@ impl Command {
     }
 
     /// Whether the command itself is forwarded to backups once accepted. A generate is
-    /// forwarded by the engine instead, as the gallery it installs (`/vo/backup/gallery`);
-    /// the backup's own messages are not forwarded.
+    /// forwarded by the engine instead, as the gallery it installs (`/vo/backup/gallery`),
+    /// and so are explore galleries (with their regions, src/engine/explore.rs); the
+    /// backup's own messages are not forwarded.
     fn forwarded(&self) -> bool {
         self.changes_state()
             && !matches!(
                 self,
-                Command::Generate(generate::Cmd::Generate | generate::Cmd::Seeded(_))
-                    | Command::Backup(_)
+                Command::Generate(
+                    generate::Cmd::Generate | generate::Cmd::Seeded(_) | generate::Cmd::Explore(_)
+                ) | Command::Backup(_)
             )
     }
 }

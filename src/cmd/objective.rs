@@ -112,6 +112,24 @@ impl Cmd {
             Cmd::Edit(edit) => edit,
         };
         let footprints = &e.stage.footprints;
+        if let Edit::Region { id, region } = edit
+            && e.exploring()
+        {
+            // While exploring, the region goes to the explore slot: no disk, no generate
+            // waited for; the session takes it with the gallery drawn from it.
+            let (id, lights) = {
+                let s = e.session();
+                (
+                    find(&s, id)?.1,
+                    footprints.select(region).iter().filter(|&&on| on).count(),
+                )
+            };
+            if e.explore_region(id, region) {
+                // Backups get the regions with the explore galleries, not each update.
+                crate::backup::Pending::take();
+                return Ok(vec![region_reply(id, region, lights)]);
+            }
+        }
         e.commit(|s| {
             Ok(match edit {
                 Edit::Aspects { id, aspects } => {
@@ -127,18 +145,7 @@ impl Cmd {
                     let (i, id) = find(s, id)?;
                     let lights = footprints.select(region).iter().filter(|&&on| on).count();
                     s.objectives[i].objective.region = region;
-                    Outcome::reply(msg(
-                        "/vo/objective/region",
-                        vec![
-                            int(id as usize),
-                            OscType::Float(region.x0),
-                            OscType::Float(region.y0),
-                            OscType::Float(region.x1),
-                            OscType::Float(region.y1),
-                            int(lights),
-                        ],
-                    ))
-                    .saved()
+                    Outcome::reply(region_reply(id, region, lights)).saved()
                 }
                 Edit::Palette { id } => {
                     let (i, id) = find(s, id)?;
@@ -240,6 +247,21 @@ fn find(s: &Session, which: Which) -> Result<(usize, u32), String> {
             )
         }
     })
+}
+
+/// `/vo/objective/region id x0 y0 x1 y1 lights`.
+fn region_reply(id: u32, region: Region, lights: usize) -> OscMessage {
+    msg(
+        "/vo/objective/region",
+        vec![
+            int(id as usize),
+            OscType::Float(region.x0),
+            OscType::Float(region.y0),
+            OscType::Float(region.x1),
+            OscType::Float(region.y1),
+            int(lights),
+        ],
+    )
 }
 
 fn palette(id: u32, o: &Objective) -> OscMessage {

@@ -6,6 +6,7 @@
 //! its gallery when done. The DMX clock never waits on any of it: it is handed the latest
 //! look through the output's watch channel.
 
+mod explore;
 mod outcome;
 pub mod persist;
 pub mod rules;
@@ -33,6 +34,7 @@ use persist::{Files, Snapshot, Writer};
 use session::{Gallery, Session};
 use visobjd_dmx::input::SourceInfo;
 use visobjd_dmx::{Input, Output, OutputStats, Patch};
+use visobjd_method::gallery::Generation;
 use visobjd_method::objective::{Objective, decode_reference};
 use visobjd_method::sampler::Spread;
 use visobjd_method::stage::{GenerateRequest, Stage};
@@ -66,6 +68,8 @@ pub struct Engine {
     patch: Patch,
     session: Mutex<Session>,
     generating: AtomicBool,
+    /// `/vo/explore`: the region slot and the worker that streams galleries.
+    explore: explore::Explore,
     /// Held while a reference is decoded: one at a time, so many senders adding 64-megapixel
     /// images at once cannot multiply the ~200 MB each decode takes.
     reading: Mutex<()>,
@@ -126,6 +130,7 @@ impl Engine {
             patch: Patch::new(&stage.scene),
             session: Mutex::new(session),
             generating: AtomicBool::new(false),
+            explore: explore::Explore::default(),
             reading: Mutex::new(()),
             generates: AtomicU64::new(0),
             lit_span: AtomicUsize::new(0),
@@ -246,29 +251,38 @@ impl Engine {
     }
 
     /// As [`Engine::forward`], building the message only if a backup follows (a gallery
-    /// costs its encoding); a message that cannot be built is logged and not sent.
+    /// costs its encoding); a message that cannot be built is logged and not sent. An
+    /// explore gallery the backups lack goes first: the command may build on it.
     fn forward_with(&self, build: impl FnOnce() -> Result<OscMessage, String>) {
         let mut backups = self.backups.lock().unwrap_or_else(|p| p.into_inner());
+        let mut msgs = self.explored_messages(!backups.is_empty());
         if backups.is_empty() {
             return;
         }
-        let m = match build() {
-            Ok(m) => m,
+        match build() {
+            Ok(m) => msgs.push(m),
             Err(e) => {
-                tracing::error!("{e}; the backups may differ from this main until they re-sync");
-                return;
+                tracing::error!("{e}; the backups may differ from this main until they re-sync")
             }
-        };
-        backups.retain(|b| {
-            let sent = b.reply(std::slice::from_ref(&m));
-            if !sent {
-                tracing::warn!(
-                    "backup {} dropped: its connection closed or fell behind; it re-syncs when it subscribes again",
-                    b.addr()
-                );
-            }
-            sent
-        });
+        }
+        send_backups(&mut backups, &msgs);
+    }
+
+    /// Whether any backup follows this main (what is only for backups is then prepared).
+    fn has_backups(&self) -> bool {
+        !self
+            .backups
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .is_empty()
+    }
+
+    /// Sends backups the latest explore gallery, if they lack it (call with the session
+    /// locked, as [`Engine::forward`]).
+    fn flush_explored(&self) {
+        let mut backups = self.backups.lock().unwrap_or_else(|p| p.into_inner());
+        let msgs = self.explored_messages(!backups.is_empty());
+        send_backups(&mut backups, &msgs);
     }
 
     /// Forwards the command this thread applies, if it was not yet (call with the session
@@ -395,6 +409,10 @@ impl Engine {
     /// Stream_Terminated packets per sACN universe) and writes the state still queued
     /// (called by [`crate::shutdown::finish`]).
     pub fn shutdown(&self) {
+        // A drag still on would keep its worker waiting for updates.
+        if let Err(e) = self.explore_stop() {
+            tracing::warn!("{e}");
+        }
         self.threads.join();
         let input = self.input.lock().unwrap_or_else(|p| p.into_inner()).take();
         if let Some(input) = input {
@@ -459,27 +477,26 @@ impl Engine {
     }
 
     /// Starts a generate on its own thread, with `seed` or the session's seed setting; the
-    /// reply (`/vo/generated`) goes to `peer` when it is done. Refused while another runs.
+    /// reply (`/vo/generated`) goes to `peer` when it is done. Refused while another runs
+    /// and while exploring (the gallery then follows the regions).
     /// Backups are sent the gallery itself (`/vo/backup/gallery`) when it is installed.
     pub fn generate(self: &Arc<Self>, peer: &Peer, seed: Option<u64>) -> Result<(), String> {
+        if self.exploring() {
+            return Err(
+                "exploring: the gallery follows the regions; send /vo/explore 0 to generate".into(),
+            );
+        }
         if self.generating.swap(true, Ordering::SeqCst) {
             return Err("a generate is already running; wait for /vo/generated".into());
         }
         let s = self.session();
         if s.objectives.is_empty() {
             self.generating.store(false, Ordering::SeqCst);
-            return Err("there are no objectives: add one with /vo/objective/add first".into());
+            return Err(NO_OBJECTIVES.into());
         }
-        let objectives: Vec<Objective> = s.objectives.iter().map(|e| e.objective.clone()).collect();
-        let constraints = s.constraints(&self.stage.scene, false);
-        let base = s.base.clone();
-        let (count, clusters) = (s.count as usize, s.clusters as usize);
+        let inputs = Inputs::of(&self.stage, &s);
         // Seeds travel as OSC int32: a random one stays in 1..=i32::MAX so it can be replayed.
-        let seed = match seed {
-            Some(seed) => seed,
-            None if s.seed == 0 => u64::from(rand::random::<u32>() >> 1).max(1),
-            None => s.seed,
-        };
+        let seed = seed.unwrap_or_else(|| s.next_seed());
         let serial = self.generates.fetch_add(1, Ordering::SeqCst) + 1;
         let mut started_msgs = vec![msg("/vo/progress", vec![OscType::Float(0.0)])];
         started_msgs.extend(self.feedback(&s));
@@ -490,25 +507,7 @@ impl Engine {
             // Whatever happens below, the next generate is allowed.
             let running = Running(&engine.generating);
             engine.notify(&started_msgs);
-            let started = Instant::now();
-            let drawn = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                if engine.panic_generate.swap(false, Ordering::SeqCst) {
-                    panic!("test hook: the generate panics");
-                }
-                engine.stage.generate(
-                    &GenerateRequest {
-                        objectives: &objectives,
-                        constraints: &constraints,
-                        base: &base,
-                        spread: engine.spread,
-                        count,
-                        clusters,
-                    },
-                    &mut rand::rngs::Xoshiro256PlusPlus::seed_from_u64(seed),
-                )
-            }));
-            let Ok(generation) = drawn else {
-                tracing::error!("generate {serial} (seed {seed}) failed: see the panic above");
+            let Some((generation, ms)) = engine.draw(&inputs, seed, serial) else {
                 let why = format!(
                     "the generate failed (an internal error, logged with seed {seed}); \
                          the gallery is unchanged, generate again"
@@ -516,26 +515,11 @@ impl Engine {
                 let e = error("/vo/generate", &why);
                 // Free before the answer: the requester may generate again at once.
                 drop(running);
+                engine.poke_explorer();
                 peer.reply(std::slice::from_ref(&e));
                 return;
             };
-            let ms = started.elapsed().as_secs_f32() * 1000.0;
-            if generation.exhausted {
-                tracing::warn!(
-                    "generate: only {} of {count} candidates after {} draws",
-                    generation.candidates.len(),
-                    generation.draws
-                );
-            }
-            let reply = msg(
-                "/vo/generated",
-                vec![
-                    OscType::Int(generation.candidates.len() as i32),
-                    OscType::Int(generation.entries.len() as i32),
-                    OscType::Float(ms),
-                    OscType::Int(seed as i32),
-                ],
-            );
+            let reply = generated(&generation, ms, seed);
             let mut s = engine.session();
             // Under the lock: the backups install it between the same two commands.
             engine.forward_with(|| {
@@ -557,12 +541,53 @@ impl Engine {
             drop(s);
             peer.reply(std::slice::from_ref(&reply));
             engine.notify(&pushes);
+            engine.poke_explorer();
         });
         if let Err(e) = spawned {
             self.generating.store(false, Ordering::SeqCst);
             return Err(format!("cannot start the generate: {e}"));
         }
         Ok(())
+    }
+
+    /// Draws a gallery from `inputs` with `seed` on the compute pool (whose threads run at
+    /// a lower priority, so the DMX clock and the OSC threads get a core the moment they
+    /// wake), with the time it took in ms. `None` when it panicked (logged).
+    fn draw(&self, inputs: &Inputs, seed: u64, serial: u64) -> Option<(Generation, f32)> {
+        let started = Instant::now();
+        let drawn = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            if self.panic_generate.swap(false, Ordering::SeqCst) {
+                panic!("test hook: the generate panics");
+            }
+            // `scope` runs its body on a pool thread: the sampling and clustering between
+            // the parallel parts are niced too, not run on this thread.
+            rayon::scope(|_| {
+                self.stage.generate(
+                    &GenerateRequest {
+                        objectives: &inputs.objectives,
+                        constraints: &inputs.constraints,
+                        base: &inputs.base,
+                        spread: self.spread,
+                        count: inputs.count,
+                        clusters: inputs.clusters,
+                    },
+                    &mut rand::rngs::Xoshiro256PlusPlus::seed_from_u64(seed),
+                )
+            })
+        }));
+        let Ok(generation) = drawn else {
+            tracing::error!("generate {serial} (seed {seed}) failed: see the panic above");
+            return None;
+        };
+        if generation.exhausted {
+            tracing::warn!(
+                "generate: only {} of {} candidates after {} draws",
+                generation.candidates.len(),
+                inputs.count,
+                generation.draws
+            );
+        }
+        Some((generation, started.elapsed().as_secs_f32() * 1000.0))
     }
 
     /// Pushes the live look to the configured Eos console and records it as preset `n`,
@@ -675,7 +700,9 @@ impl Engine {
         if s.blackout {
             parts.push("BLACKOUT".to_string());
         }
-        if self.is_generating() {
+        if self.exploring() {
+            parts.push("exploring...".to_string());
+        } else if self.is_generating() {
             parts.push("generating...".to_string());
         }
         parts.push(match (&s.gallery, s.entry) {
@@ -750,6 +777,25 @@ impl Engine {
     }
 }
 
+/// Sends messages to every backup, in order; a backup whose connection closed or fell
+/// behind (its queue overflowed) is dropped: it re-syncs from the state when it
+/// subscribes again.
+fn send_backups(backups: &mut Vec<Peer>, msgs: &[OscMessage]) {
+    if msgs.is_empty() {
+        return;
+    }
+    backups.retain(|b| {
+        let sent = b.reply(msgs);
+        if !sent {
+            tracing::warn!(
+                "backup {} dropped: its connection closed or fell behind; it re-syncs when it subscribes again",
+                b.addr()
+            );
+        }
+        sent
+    });
+}
+
 /// Universes as status lists them: `1 2 5`.
 fn universe_list(universes: &[u16]) -> String {
     universes
@@ -796,6 +842,45 @@ pub enum TestHook {
     /// Makes every state write wait this many milliseconds first.
     SlowDisk(u64),
 }
+
+/// What a generate draws from, copied out of the session so it runs with the session
+/// unlocked.
+struct Inputs {
+    objectives: Vec<Objective>,
+    constraints: visobjd_method::sampler::Constraints,
+    base: Look,
+    count: usize,
+    clusters: usize,
+}
+
+impl Inputs {
+    fn of(stage: &Stage, s: &Session) -> Inputs {
+        Inputs {
+            objectives: s.objectives.iter().map(|e| e.objective.clone()).collect(),
+            constraints: s.constraints(&stage.scene, false),
+            base: s.base.clone(),
+            count: s.count as usize,
+            clusters: s.clusters as usize,
+        }
+    }
+}
+
+/// `/vo/generated candidates clusters ms seed`, the reply to a generate and the push of
+/// every gallery.
+fn generated(generation: &Generation, ms: f32, seed: u64) -> OscMessage {
+    msg(
+        "/vo/generated",
+        vec![
+            OscType::Int(generation.candidates.len() as i32),
+            OscType::Int(generation.entries.len() as i32),
+            OscType::Float(ms),
+            OscType::Int(seed as i32),
+        ],
+    )
+}
+
+/// Why a generate (or an explore) cannot start without objectives.
+const NO_OBJECTIVES: &str = "there are no objectives: add one with /vo/objective/add first";
 
 /// Clears the "generating" flag when dropped, so a generate that panics never blocks the
 /// next one.

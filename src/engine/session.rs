@@ -150,6 +150,15 @@ impl Session {
         }
     }
 
+    /// The seed of the next generate: the seed setting, or a new random one within
+    /// 1..=i32::MAX (seeds travel as OSC int32, so a random one can be replayed).
+    pub fn next_seed(&self) -> u64 {
+        match self.seed {
+            0 => u64::from(rand::random::<u32>() >> 1).max(1),
+            seed => seed,
+        }
+    }
+
     /// The sampler's constraints: locked lights include the lights of locked groups, then
     /// the [`Rules`] are added.
     pub fn constraints(&self, scene: &Scene, per_light: bool) -> Constraints {
