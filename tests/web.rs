@@ -1,6 +1,8 @@
-//! The web gallery end to end: over plain HTTP (pictures, state, picks, limits, the
-//! allow-list), and in headless Chromium driven through the DevTools protocol: load the
-//! page, generate over OSC, see the thumbnails appear, tap one, see it on the wire.
+//! The web page end to end: over plain HTTP (pictures, state, commands, limits, the
+//! allow-list, the password, cross-origin and hostile uploads), and in headless Chromium
+//! driven through the DevTools protocol: a whole designer's session (upload and add
+//! references, draw a region, generate, members, transfer, pick, undo, save, recall), each
+//! step checked on the page, in a screenshot, and on the wire.
 
 mod common;
 
@@ -96,19 +98,45 @@ fn exchange(mut s: TcpStream, request: &[u8]) -> Response {
 }
 
 fn request(addr: SocketAddr, method: &str, path: &str) -> Response {
-    match TcpStream::connect(addr) {
-        Ok(s) => exchange(
-            s,
-            // DevTools answers only a Host that is an address.
-            format!("{method} {path} HTTP/1.1\r\nHost: {addr}\r\nContent-Length: 0\r\n\r\n")
-                .as_bytes(),
-        ),
-        Err(_) => Response {
+    send(addr, method, path, &[], b"")
+}
+
+/// A request with extra header lines (`Name: value`) and a body; Host is the address
+/// (DevTools answers only a Host that is an address) unless a header sets it.
+fn send(addr: SocketAddr, method: &str, path: &str, headers: &[&str], body: &[u8]) -> Response {
+    let Ok(s) = TcpStream::connect(addr) else {
+        return Response {
             status: 0,
             kind: String::new(),
             body: Vec::new(),
-        },
+        };
+    };
+    let mut head = format!("{method} {path} HTTP/1.1\r\n");
+    if !headers
+        .iter()
+        .any(|h| h.to_ascii_lowercase().starts_with("host:"))
+    {
+        head.push_str(&format!("Host: {addr}\r\n"));
     }
+    for h in headers {
+        head.push_str(h);
+        head.push_str("\r\n");
+    }
+    head.push_str(&format!(
+        "Content-Length: {}\r\nConnection: close\r\n\r\n",
+        body.len()
+    ));
+    let mut raw = head.into_bytes();
+    raw.extend_from_slice(body);
+    exchange(s, &raw)
+}
+
+/// `POST /osc` with a JSON command, as the page sends it.
+fn osc(addr: SocketAddr, address: &str, args: serde_json::Value, headers: &[&str]) -> Response {
+    let mut all = vec!["Content-Type: application/json"];
+    all.extend_from_slice(headers);
+    let body = serde_json::json!({ "address": address, "args": args }).to_string();
+    send(addr, "POST", "/osc", &all, body.as_bytes())
 }
 
 fn get(addr: SocketAddr, path: &str) -> Response {
@@ -181,9 +209,12 @@ fn the_gallery_over_http() {
     let dark = jpeg(&get(addr, "/live.jpg"));
 
     // A tap picks through the OSC command path: reply, status, DMX.
-    let r = request(addr, "POST", "/pick/2");
+    let r = osc(addr, "/vo/pick", serde_json::json!([2]), &[]);
     assert_eq!(r.status, 200, "{}", String::from_utf8_lossy(&r.body));
-    assert_eq!(r.json()["reply"], "/vo/picked 2 1");
+    assert_eq!(
+        r.json()["replies"],
+        serde_json::json!([{ "address": "/vo/picked", "args": [2, 1] }])
+    );
     assert_eq!(d.status().entry, 2);
     let look = d.candidate(2, 1);
     d.wire.wait_look(Proto::Sacn, &look);
@@ -194,7 +225,7 @@ fn the_gallery_over_http() {
     );
     assert_eq!(get(addr, "/state.json").json()["entry"], 2);
     // A refused pick changes nothing and says why.
-    let r = request(addr, "POST", &format!("/pick/{}", n + 1));
+    let r = osc(addr, "/vo/pick", serde_json::json!([n + 1]), &[]);
     assert_eq!(r.status, 409);
     assert!(
         r.json()["error"]
@@ -203,19 +234,55 @@ fn the_gallery_over_http() {
     );
     assert_eq!(d.status().entry, 2);
 
+    // Members on demand, and the other pictures.
+    jpeg(&get(addr, &format!("/thumb/{serial}/2/1.jpg")));
+    assert_eq!(get(addr, &format!("/thumb/{serial}/2/999.jpg")).status, 404);
+    jpeg(&get(addr, "/selected/1.jpg"));
+    jpeg(&get(addr, "/history/u1.jpg"));
+    assert_eq!(get(addr, "/history/u99.jpg").status, 404);
+    jpeg(&get(addr, "/references/grey.png"));
+    let refs = get(addr, "/references.json").json();
+    let mut on_disk: Vec<String> = std::fs::read_dir(d.refs())
+        .expect("refs")
+        .filter_map(|e| e.ok()?.file_name().into_string().ok())
+        .filter(|n| n.ends_with(".png") || n.ends_with(".jpg"))
+        .collect();
+    on_disk.sort();
+    assert!(on_disk.len() >= 3, "{on_disk:?}");
+    assert_eq!(refs["references"], serde_json::json!(on_disk));
+
     // Bounded and strict.
     let s = TcpStream::connect(addr).expect("connect");
-    let huge = format!("GET / HTTP/1.1\r\nX-Pad: {}\r\n\r\n", "a".repeat(9000));
+    let huge = format!("GET / HTTP/1.1\r\nX-Pad: {}\r\n\r\n", "a".repeat(20000));
     assert_eq!(exchange(s, huge.as_bytes()).status, 431);
-    let s = TcpStream::connect(addr).expect("connect");
-    assert_eq!(
-        exchange(s, b"POST /pick/1 HTTP/1.1\r\nContent-Length: 5000\r\n\r\n").status,
-        413
+    let big = format!(
+        "{{\"address\":\"/vo/ping\",\"args\":[\"{}\"]}}",
+        "a".repeat(5000)
     );
+    let r = send(
+        addr,
+        "POST",
+        "/osc",
+        &["Content-Type: application/json"],
+        big.as_bytes(),
+    );
+    assert_eq!(r.status, 413);
     let s = TcpStream::connect(addr).expect("connect");
     assert_eq!(exchange(s, b"hello there\r\n\r\n").status, 400);
-    assert_eq!(request(addr, "PUT", "/pick/1").status, 405);
+    assert_eq!(request(addr, "PUT", "/osc").status, 405);
     assert_eq!(request(addr, "GET", "/nothing").status, 404);
+    let r = send(
+        addr,
+        "POST",
+        "/osc",
+        &["Content-Type: application/json"],
+        b"{not json",
+    );
+    assert_eq!(r.status, 400, "{}", String::from_utf8_lossy(&r.body));
+    let r = osc(addr, "/vo/backup/subscribe", serde_json::json!([]), &[]);
+    assert_eq!(r.status, 403);
+    let r = osc(addr, "/vo/pick", serde_json::json!([[1]]), &[]);
+    assert_eq!(r.status, 400);
     assert_eq!(d.status().entry, 2);
 }
 

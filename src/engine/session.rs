@@ -211,6 +211,11 @@ impl Session {
         self.last_change = Some(Change::Step);
     }
 
+    /// The base looks undo and redo step to, oldest first (the last is the next step).
+    pub fn history(&self) -> (&[Look], &[Look]) {
+        (&self.undo, &self.redo)
+    }
+
     /// The objective with `id`, as an index.
     pub fn objective_index(&self, id: u32) -> Option<usize> {
         self.objectives.iter().position(|e| e.id == id)
