@@ -122,10 +122,13 @@ fn send(addr: SocketAddr, method: &str, path: &str, headers: &[&str], body: &[u8
         head.push_str(h);
         head.push_str("\r\n");
     }
-    head.push_str(&format!(
-        "Content-Length: {}\r\nConnection: close\r\n\r\n",
-        body.len()
-    ));
+    if !headers
+        .iter()
+        .any(|h| h.to_ascii_lowercase().starts_with("content-length:"))
+    {
+        head.push_str(&format!("Content-Length: {}\r\n", body.len()));
+    }
+    head.push_str("Connection: close\r\n\r\n");
     let mut raw = head.into_bytes();
     raw.extend_from_slice(body);
     exchange(s, &raw)
@@ -525,4 +528,147 @@ fn a_tap_in_the_browser_puts_the_entry_live() {
         "showed the reference image",
         |v| v == 1,
     );
+}
+
+/// An 8x8 PNG of one colour, as bytes.
+fn png(rgb: [u8; 3]) -> Vec<u8> {
+    let img = image::RgbImage::from_pixel(8, 8, image::Rgb(rgb));
+    let mut out = std::io::Cursor::new(Vec::new());
+    img.write_to(&mut out, image::ImageFormat::Png)
+        .expect("encode");
+    out.into_inner()
+}
+
+#[test]
+fn hostile_requests_change_nothing() {
+    let (mut d, addr) = start("web-hostile");
+    d.add_objective("warm.png", "both");
+    d.generate();
+    d.ok("/vo/pick", vec![int(1)], "/vo/picked");
+    let live = d.live();
+    d.wire.wait_look(Proto::Sacn, &live);
+    let listed = || get(addr, "/references.json").json()["references"].clone();
+    let before = listed();
+
+    // Uploads: too big (refused before the body is read), not an image, the wrong type
+    // for its name, names with paths in them.
+    let r = send(
+        addr,
+        "PUT",
+        "/references/huge.png",
+        &["Content-Length: 40000000"],
+        b"",
+    );
+    assert_eq!(
+        r.status,
+        413,
+        "{}\n{}",
+        String::from_utf8_lossy(&r.body),
+        d.log_text()
+    );
+    for (name, body, status) in [
+        ("fake.jpg", b"this is not a jpeg at all".to_vec(), 400),
+        ("blue.jpg", png([0, 0, 255]), 400),
+        ("notes.txt", png([0, 0, 255]), 400),
+        ("..%2F..%2Fescape.png", png([0, 0, 255]), 400),
+        ("sub%2Fx.png", png([0, 0, 255]), 400),
+        (".hidden.png", png([0, 0, 255]), 400),
+        ("warm.png", png([0, 0, 255]), 409),
+    ] {
+        let r = send(addr, "PUT", &format!("/references/{name}"), &[], &body);
+        assert_eq!(
+            r.status,
+            status,
+            "{name}: {}",
+            String::from_utf8_lossy(&r.body)
+        );
+        let e = r.json()["error"].as_str().unwrap_or_default().to_string();
+        assert!(
+            e.starts_with("upload `"),
+            "{name}: a sentence naming it: {e}"
+        );
+    }
+    assert_eq!(listed(), before, "no file was stored");
+    assert!(!d.refs().join("../escape.png").exists());
+    assert_eq!(get(addr, "/references/..%2Fvisobjd.toml").status, 404);
+
+    // Another site's page, a rebound name, a GET that would change something.
+    let evil = osc(
+        addr,
+        "/vo/pick",
+        serde_json::json!([2]),
+        &["Origin: http://evil.example"],
+    );
+    assert_eq!(evil.status, 403, "{}", String::from_utf8_lossy(&evil.body));
+    let site = osc(
+        addr,
+        "/vo/pick",
+        serde_json::json!([2]),
+        &["Sec-Fetch-Site: cross-site"],
+    );
+    assert_eq!(site.status, 403);
+    let rebound = osc(
+        addr,
+        "/vo/pick",
+        serde_json::json!([2]),
+        &["Host: evil.example:8080"],
+    );
+    assert_eq!(rebound.status, 403);
+    assert_eq!(get(addr, "/osc").status, 405);
+    let r = send(
+        addr,
+        "PUT",
+        "/references/new.png",
+        &["Origin: http://evil.example"],
+        &png([0, 255, 0]),
+    );
+    assert_eq!(r.status, 403);
+    assert_eq!(listed(), before);
+    assert_eq!(d.status().entry, 1);
+    assert_eq!(d.live(), live);
+    d.wire.wait_look(Proto::Sacn, &live);
+
+    // A good upload goes through (and shows in the list).
+    let r = send(addr, "PUT", "/references/new.png", &[], &png([0, 255, 0]));
+    assert_eq!(r.status, 201, "{}", String::from_utf8_lossy(&r.body));
+    assert!(d.refs().join("new.png").is_file());
+}
+
+#[test]
+fn the_password_is_asked_for() {
+    let lo = IpAddr::from([127, 0, 0, 1]);
+    let port = free_port(lo, lo);
+    let mut d = Daemon::start_with(
+        "web-password",
+        &format!("\n[http]\nlisten = \"127.0.0.1:{port}\"\npassword = \"stage left\"\n"),
+    );
+    let addr = SocketAddr::from(([127, 0, 0, 1], port));
+    use base64::Engine as _;
+    let b64 = |s: &str| base64::engine::general_purpose::STANDARD.encode(s);
+    let good = format!("Authorization: Basic {}", b64("designer:stage left"));
+    let end = Instant::now() + PATIENCE;
+    while send(addr, "GET", "/state.json", &[&good], b"").status != 200 {
+        assert!(Instant::now() < end, "the web page never answered");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    d.add_objective("warm.png", "both");
+    d.generate();
+    let live = d.live();
+    let r = get(addr, "/");
+    assert_eq!(r.status, 401);
+    let wrong = format!("Authorization: Basic {}", b64("designer:stage right"));
+    for auth in [&[][..], &[wrong.as_str()][..]] {
+        let r = osc(addr, "/vo/pick", serde_json::json!([1]), auth);
+        assert_eq!(r.status, 401);
+        assert!(
+            r.json()["error"]
+                .as_str()
+                .is_some_and(|e| e.contains("password"))
+        );
+    }
+    assert_eq!(d.status().entry, 0);
+    assert_eq!(d.live(), live);
+    let r = osc(addr, "/vo/pick", serde_json::json!([1]), &[&good]);
+    assert_eq!(r.status, 200, "{}", String::from_utf8_lossy(&r.body));
+    assert_eq!(d.status().entry, 1);
 }
