@@ -366,15 +366,11 @@ struct Page {
 }
 
 impl Page {
-    /// Evaluates `expression` in the page; its value as JSON.
-    fn eval(&mut self, expression: &str) -> serde_json::Value {
+    /// Calls a DevTools method; its result.
+    fn call(&mut self, method: &str, params: serde_json::Value) -> serde_json::Value {
         self.next_id += 1;
         let id = self.next_id;
-        let call = serde_json::json!({
-            "id": id,
-            "method": "Runtime.evaluate",
-            "params": { "expression": expression, "returnByValue": true },
-        });
+        let call = serde_json::json!({ "id": id, "method": method, "params": params });
         self.ws
             .send(tungstenite::Message::text(call.to_string()))
             .expect("send to DevTools");
@@ -383,13 +379,63 @@ impl Page {
             let Ok(text) = m.to_text() else { continue };
             let v: serde_json::Value = serde_json::from_str(text).expect("DevTools JSON");
             if v["id"] == id {
-                assert!(
-                    v["result"]["exceptionDetails"].is_null(),
-                    "{expression}: {v}"
-                );
-                return v["result"]["result"]["value"].clone();
+                assert!(v["error"].is_null(), "{method}: {v}");
+                return v["result"].clone();
             }
         }
+    }
+
+    /// Evaluates `expression` in the page; its value as JSON.
+    fn eval(&mut self, expression: &str) -> serde_json::Value {
+        let r = self.call(
+            "Runtime.evaluate",
+            serde_json::json!({ "expression": expression, "returnByValue": true, "awaitPromise": true }),
+        );
+        assert!(r["exceptionDetails"].is_null(), "{expression}: {r}");
+        r["result"]["value"].clone()
+    }
+
+    /// Clicks the element `selector` names (it must exist).
+    fn click(&mut self, selector: &str) {
+        let js = format!(
+            "(() => {{ const e = document.querySelector({selector:?}); if (!e) return false; e.click(); return true; }})()"
+        );
+        assert_eq!(self.eval(&js), true, "no {selector} on the page");
+    }
+
+    /// Saves a screenshot of the page as `name`.png under the test's target folder.
+    fn screenshot(&mut self, name: &str) -> PathBuf {
+        use base64::Engine as _;
+        let r = self.call(
+            "Page.captureScreenshot",
+            serde_json::json!({ "format": "png", "captureBeyondViewport": true }),
+        );
+        let png = base64::engine::general_purpose::STANDARD
+            .decode(r["data"].as_str().expect("screenshot data"))
+            .expect("base64");
+        let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("web-session");
+        std::fs::create_dir_all(&dir).expect("screenshot folder");
+        let path = dir.join(format!("{name}.png"));
+        std::fs::write(&path, png).expect("write screenshot");
+        path
+    }
+
+    /// A real mouse drag (DevTools input, as a hand would): from and to in page pixels.
+    fn drag(&mut self, from: (f64, f64), to: (f64, f64)) {
+        let mouse = |page: &mut Page, kind: &str, (x, y): (f64, f64), buttons: u8| {
+            page.call(
+                "Input.dispatchMouseEvent",
+                serde_json::json!({ "type": kind, "x": x, "y": y, "button": "left", "buttons": buttons, "clickCount": 1 }),
+            );
+        };
+        mouse(self, "mouseMoved", from, 0);
+        mouse(self, "mousePressed", from, 1);
+        for i in 1..=8 {
+            let f = f64::from(i) / 8.0;
+            let p = (from.0 + (to.0 - from.0) * f, from.1 + (to.1 - from.1) * f);
+            mouse(self, "mouseMoved", p, 1);
+        }
+        mouse(self, "mouseReleased", to, 0);
     }
 
     /// Polls `expression` until `want` holds (bounded); returns the last value.
@@ -425,6 +471,7 @@ fn open(browser: &Path, url: &str, name: &str) -> (Browser, Page) {
             "--disable-component-update",
             "--disable-sync",
             "--remote-debugging-port=0",
+            "--window-size=1500,1100",
         ])
         .arg(format!("--user-data-dir={}", profile.display()))
         .arg(url)
@@ -671,4 +718,275 @@ fn the_password_is_asked_for() {
     let r = osc(addr, "/vo/pick", serde_json::json!([1]), &[&good]);
     assert_eq!(r.status, 200, "{}", String::from_utf8_lossy(&r.body));
     assert_eq!(d.status().entry, 1);
+}
+
+/// The look the page shows (its last state: every light's intensity and colour), as the
+/// wire decoder compares it; a light without colour reads `1 1 1` as on OSC.
+fn page_look(page: &mut Page) -> Vec<common::daemon::Light> {
+    let v = page.eval(
+        "JSON.stringify(st ? st.lights.map(l => [l.ch, l.intensity, l.colour ? l.color : [1, 1, 1]]) : [])",
+    );
+    let rows: Vec<(i32, f32, [f32; 3])> =
+        serde_json::from_str(v.as_str().expect("text")).expect("lights");
+    rows.into_iter()
+        .map(|(ch, intensity, color)| common::daemon::Light {
+            ch,
+            intensity,
+            color,
+        })
+        .collect()
+}
+
+/// Waits until the page shows `want` (within float noise), then checks both protocols on
+/// the wire carry what the page shows.
+fn shows_on_page_and_wire(page: &mut Page, d: &Daemon, want: &[common::daemon::Light], step: &str) {
+    let end = Instant::now() + Duration::from_secs(30);
+    loop {
+        let shown = page_look(page);
+        let same = shown.len() == want.len()
+            && shown.iter().zip(want).all(|(a, b)| {
+                a.ch == b.ch
+                    && (a.intensity - b.intensity).abs() < 1e-5
+                    && a.color
+                        .iter()
+                        .zip(&b.color)
+                        .all(|(x, y)| (x - y).abs() < 1e-5)
+            });
+        if same {
+            d.wire.wait_look(Proto::Sacn, &shown);
+            d.wire.wait_look(Proto::Artnet, &shown);
+            return;
+        }
+        assert!(
+            Instant::now() < end,
+            "{step}: the page never showed {want:?}; it shows {shown:?}"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+/// Waits until every image under `selector` has loaded, and that there are `n`.
+fn images_loaded(page: &mut Page, selector: &str, n: usize, what: &str) {
+    let js = format!(
+        "[...document.querySelectorAll({selector:?})].filter(i => i.complete && i.naturalWidth > 0).length"
+    );
+    page.wait(&js, what, |v| v.as_u64() == Some(n as u64));
+}
+
+#[test]
+fn a_designer_session_in_the_browser() {
+    let Some(browser) = chromium() else {
+        return tools::missing("Chromium", "is not installed", "apt-get install chromium");
+    };
+    let (mut d, addr) = start("web-session");
+    d.ok(
+        "/vo/generate/clusters",
+        vec![int(6)],
+        "/vo/generate/clusters",
+    );
+    d.ok("/vo/fade", vec![common::daemon::float(0.0)], "/vo/fade");
+    let url = format!("http://{addr}/");
+    let (_browser, mut page) = open(&browser, &url, "session");
+    page.wait(
+        "document.getElementById('status')?.textContent ?? ''",
+        "showed the daemon's status",
+        |v| v.as_str().is_some_and(|s| s.contains("no gallery yet")),
+    );
+
+    // 1. Upload a new reference through the file picker, as a designer would.
+    let upload = temp_dir("web-session-upload").join("deep blue.png");
+    std::fs::write(&upload, png([10, 30, 200])).expect("write the upload");
+    let doc = page.call("DOM.getDocument", serde_json::json!({}));
+    let input = page.call(
+        "DOM.querySelector",
+        serde_json::json!({ "nodeId": doc["root"]["nodeId"], "selector": "#upload" }),
+    );
+    page.call(
+        "DOM.setFileInputFiles",
+        serde_json::json!({ "nodeId": input["nodeId"], "files": [upload.display().to_string()] }),
+    );
+    page.wait(
+        "[...document.querySelectorAll('#references .ref')].map(b => b.dataset.name).join(',')",
+        "listed the uploaded reference",
+        |v| {
+            v.as_str()
+                .is_some_and(|s| s.split(',').any(|n| n == "deep blue.png"))
+        },
+    );
+    assert_eq!(
+        std::fs::read(d.refs().join("deep blue.png")).expect("stored"),
+        std::fs::read(&upload).expect("upload")
+    );
+
+    // 2. Add two references as objectives: one for both aspects, the new one for colour.
+    page.click("#references .ref[data-name='warm.png']");
+    page.wait(
+        "document.querySelectorAll('#objectives .objective').length",
+        "added warm.png",
+        |v| v == 1,
+    );
+    page.eval("document.getElementById('aspect').value = 'color'; true");
+    page.click("#references .ref[data-name='deep blue.png']");
+    page.wait(
+        "document.querySelectorAll('#objectives .objective').length",
+        "added deep blue.png",
+        |v| v == 2,
+    );
+    assert_eq!(d.status().objectives, 2);
+    let listing = d.call("/vo/objectives", vec![], "/vo/objectives/end");
+    assert_eq!(common::daemon::text(&listing[1].args[1]), "deep blue.png");
+    assert_eq!(common::daemon::text(&listing[1].args[2]), "color");
+    images_loaded(
+        &mut page,
+        "#objectives img",
+        2,
+        "showed both reference images",
+    );
+    page.screenshot("1-references");
+
+    // 3. Draw objective 1's region on the stage with the mouse.
+    page.click("#objectives .objective[data-id='1']");
+    page.wait("chosen", "selected objective 1", |v| v == 1);
+    let rect = page.eval(
+        "(() => { const b = document.getElementById('stage').getBoundingClientRect(); return [b.left, b.top, b.width, b.height]; })()",
+    );
+    let r: Vec<f64> = serde_json::from_value(rect).expect("rect");
+    let at = |fx: f64, fy: f64| (r[0] + r[2] * fx, r[1] + r[3] * fy);
+    page.drag(at(0.1, 0.2), at(0.5, 0.9));
+    let region = page.wait("st.objectives[0].region", "took the drawn region", |v| {
+        v[2].as_f64().is_some_and(|x1| (x1 - 0.5).abs() < 0.02)
+    });
+    let listing = d.call("/vo/objectives", vec![], "/vo/objectives/end");
+    for (i, want) in [0.1, 0.2, 0.5, 0.9].iter().enumerate() {
+        let daemon = match listing[0].args[3 + i] {
+            rosc::OscType::Float(f) => f64::from(f),
+            ref other => panic!("a float, got {other:?}"),
+        };
+        assert!(
+            (daemon - want).abs() < 0.02,
+            "x0 y0 x1 y1 {i}: {daemon} vs {want}"
+        );
+        assert!((region[i].as_f64().expect("num") - daemon).abs() < 1e-6);
+    }
+    page.eval("document.getElementById('showsel').click(); true");
+    page.wait(
+        "document.getElementById('stageimg').getAttribute('src')",
+        "showed the lights the region selects",
+        |v| v.as_str().is_some_and(|s| s.starts_with("/selected/1.jpg")),
+    );
+    images_loaded(&mut page, "#stageimg", 1, "drew the selected lights");
+    let chosen = page.eval("st.objectives[0].selected.length");
+    assert!(
+        chosen.as_u64().is_some_and(|n| n > 0),
+        "the region selects lights"
+    );
+    page.screenshot("2-region");
+    page.eval("document.getElementById('showsel').click(); true");
+
+    // 4. Generate from the page; the gallery arrives by the event stream.
+    page.click("#generate");
+    let n = page.wait(
+        "st.gallery ? st.gallery.sizes.length : 0",
+        "showed a gallery",
+        |v| v.as_u64().is_some_and(|n| n > 1),
+    );
+    let n = n.as_u64().expect("n") as usize;
+    assert_eq!(d.gallery().len(), n);
+    images_loaded(
+        &mut page,
+        "#gallery .entry > .thumb img",
+        n,
+        "showed every entry",
+    );
+    page.screenshot("3-gallery");
+
+    // 5. Open entry 2's members.
+    page.click("#gallery .entry[data-k='2'] .members");
+    let size = d.gallery()[1] as usize;
+    images_loaded(
+        &mut page,
+        "#gallery .entry[data-k='2'] .member img",
+        size,
+        "showed entry 2's members",
+    );
+    page.screenshot("4-members");
+
+    // 6. Transfer a group from entry 3 onto the (dark) stage.
+    let group = page
+        .eval("st.groups[0].name")
+        .as_str()
+        .expect("a group")
+        .to_string();
+    let members: Vec<i32> = page
+        .eval("st.groups[0].lights")
+        .as_array()
+        .expect("lights")
+        .iter()
+        .map(|v| v.as_i64().expect("ch") as i32)
+        .collect();
+    page.eval(&format!(
+        "document.getElementById('transfergroup').value = {group:?}; true"
+    ));
+    let before = d.live();
+    let third = d.candidate(3, 1);
+    page.click("#gallery .entry[data-k='3'] .transfer");
+    let transferred: Vec<common::daemon::Light> = before
+        .iter()
+        .zip(&third)
+        .map(|(b, c)| {
+            if members.contains(&b.ch) {
+                c.clone()
+            } else {
+                b.clone()
+            }
+        })
+        .collect();
+    shows_on_page_and_wire(&mut page, &d, &transferred, "transfer");
+    assert_eq!(d.live(), transferred);
+    page.screenshot("5-transfer");
+
+    // 7. Pick another entry.
+    let fourth = d.candidate(4, 1);
+    page.click("#gallery .entry[data-k='4'] .thumb");
+    shows_on_page_and_wire(&mut page, &d, &fourth, "pick 4");
+    page.wait(
+        "document.querySelector('#gallery .thumb.live')?.parentElement.dataset.k ?? ''",
+        "marked entry 4 live",
+        |v| v == "4",
+    );
+    assert_eq!(d.status().entry, 4);
+
+    // 8. Undo: back to the transferred look; the history shows thumbnails.
+    page.click("#undo");
+    shows_on_page_and_wire(&mut page, &d, &transferred, "undo");
+    images_loaded(&mut page, "#history .redo img", 1, "showed the redo step");
+    page.wait(
+        "document.querySelectorAll('#history .undo img').length",
+        "showed the undo steps",
+        |v| v.as_u64().is_some_and(|n| n >= 1),
+    );
+    page.screenshot("6-undo");
+
+    // 9. Save it as look 1 "Act 1", then go elsewhere and recall it.
+    page.eval("document.getElementById('looknum').value = '1'; document.getElementById('looklabel').value = 'Act 1'; true");
+    page.click("#save");
+    images_loaded(&mut page, "#looks .look img", 1, "showed the saved look");
+    let looks = d.call("/vo/looks", vec![], "/vo/looks/end");
+    assert_eq!(common::daemon::text(&looks[0].args[1]), "Act 1");
+    page.click("#gallery .entry[data-k='1'] .thumb");
+    let first = d.candidate(1, 1);
+    shows_on_page_and_wire(&mut page, &d, &first, "pick 1");
+    page.click("#looks .look[data-n='1']");
+    shows_on_page_and_wire(&mut page, &d, &transferred, "recall look 1");
+    assert_eq!(d.live(), transferred);
+    page.wait(
+        "document.getElementById('status')?.textContent ?? ''",
+        "showed the status line with the output's health",
+        |v| v.as_str().is_some_and(|s| s.contains("fps")),
+    );
+    page.screenshot("7-recalled");
+    assert_eq!(
+        page.eval("document.getElementById('error').textContent"),
+        ""
+    );
 }
