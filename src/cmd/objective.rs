@@ -297,3 +297,37 @@ fn reweigh(
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use visobjd_method::objective::PaletteColor;
+
+    fn palette(weights: &[f32]) -> Vec<PaletteColor> {
+        weights
+            .iter()
+            .map(|&weight| PaletteColor {
+                color: [0.5; 3],
+                weight,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_new_weight_keeps_the_sum_and_the_others_proportions() {
+        let mut p = palette(&[0.5, 0.3, 0.2]);
+        reweigh(&mut p, 2, 0.6).unwrap();
+        let w: Vec<f32> = p.iter().map(|c| c.weight).collect();
+        assert!((w[2] - 0.6).abs() < 1e-6);
+        assert!(
+            (w[0] - 0.25).abs() < 1e-6 && (w[1] - 0.15).abs() < 1e-6,
+            "{w:?}"
+        );
+        let mut p = palette(&[1.0, 0.0, 0.0]);
+        reweigh(&mut p, 0, 0.5).unwrap();
+        assert_eq!(p[1].weight, 0.25);
+        let mut one = palette(&[1.0]);
+        assert!(reweigh(&mut one, 0, 0.5).is_err());
+        reweigh(&mut one, 0, 1.0).unwrap();
+    }
+}

@@ -450,7 +450,7 @@ impl Engine {
         }
         {
             let _one_at_a_time = self.reading.lock().unwrap_or_else(|p| p.into_inner());
-            visobjd_method::objective::decode_reference_bytes(bytes).map_err(|e| refused(e))?;
+            visobjd_method::objective::decode_reference_bytes(bytes).map_err(&refused)?;
         }
         let path = self.references.join(name);
         if path.exists() {
