@@ -109,6 +109,14 @@ pub struct HttpConfig {
     /// Listen address such as `127.0.0.1:8080`; empty (the default) turns it off. Its
     /// clients are checked against `osc.allow` like OSC senders.
     pub listen: String,
+    /// The page's password (HTTP Basic, any user name); empty: none asked. At load, the
+    /// content of `password_file` when that is set instead.
+    pub password: String,
+    /// A file holding the password (its first line), so it need not sit in the config;
+    /// relative to the config's folder.
+    pub password_file: String,
+    /// Host names (besides addresses and `localhost`) the page may be opened by.
+    pub hosts: Vec<String>,
 }
 
 /// The `[capture]` section (docs/capture.md).
@@ -301,6 +309,28 @@ impl Config {
         if let Some(sacn) = &file.input.sacn {
             sacn.addresses().map_err(at)?;
         }
+        let mut http = file.http;
+        if !http.password_file.is_empty() {
+            if !http.password.is_empty() {
+                return Err(at(
+                    "http: set password or password_file, not both".to_string()
+                ));
+            }
+            let p = resolve(Path::new(&http.password_file));
+            let text = std::fs::read_to_string(&p).map_err(|e| {
+                at(format!(
+                    "http.password_file {}: cannot read it: {e}",
+                    p.display()
+                ))
+            })?;
+            http.password = text.lines().next().unwrap_or_default().to_string();
+            if http.password.is_empty() {
+                return Err(at(format!(
+                    "http.password_file {}: its first line is empty",
+                    p.display()
+                )));
+            }
+        }
         let mut output = file.output;
         if let Some(backup) = &file.backup {
             crate::backup::configure(backup, &mut output).map_err(at)?;
@@ -315,7 +345,7 @@ impl Config {
             input: file.input,
             generate: file.generate,
             eos: file.eos,
-            http: file.http,
+            http,
             capture: file.capture,
             backup: file.backup,
         })
@@ -410,6 +440,24 @@ mod tests {
         assert_eq!(c.http.listen, "127.0.0.1:8080");
         let e = Config::parse(Path::new("c.toml"), "[http]\nlisten = \"8080\"\n").unwrap_err();
         assert!(e.contains("http.listen"), "{e}");
+        let dir = std::env::temp_dir().join(format!("visobjd-http-pw-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(dir.join("pw"), "stage left\nignored\n").unwrap();
+        let c = Config::parse(&dir.join("c.toml"), "[http]\npassword_file = \"pw\"\n").unwrap();
+        assert_eq!(c.http.password, "stage left");
+        let e = Config::parse(
+            &dir.join("c.toml"),
+            "[http]\npassword = \"a\"\npassword_file = \"pw\"\n",
+        )
+        .unwrap_err();
+        assert!(e.contains("not both"), "{e}");
+        let e =
+            Config::parse(&dir.join("c.toml"), "[http]\npassword_file = \"nope\"\n").unwrap_err();
+        assert!(
+            e.contains("http.password_file") && e.contains("nope"),
+            "{e}"
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
         let e = Config::parse(Path::new("c.toml"), "[http]\nport = 1\n").unwrap_err();
         assert!(e.contains("port"), "{e}");
     }

@@ -1,56 +1,72 @@
-//! The web gallery: an optional HTTP/1.1 listener (`[http] listen`) serving one
-//! self-contained page that shows the gallery as numbered thumbnails, the live look, and
-//! the objectives with their reference images and regions; it polls `/state.json` and
-//! picks through the same handler OSC uses, so there is one implementation of a pick.
+//! The designer's web page (docs/web.md): an optional HTTP/1.1 server (`[http] listen`)
+//! on axum, serving one self-contained page, the pictures it shows, an event stream of
+//! every change, and `POST /osc`, through which every change the page makes runs the same
+//! OSC command path a tablet's message does (one implementation per change).
 //!
-//! Deliberately tiny and bounded instead of a web framework (compile time, attack
-//! surface): GET and POST only, one request per connection, 8 KiB of head, 1 KiB of body,
-//! 10 s to send the request, 32 connections at once, and the `osc.allow` list checked on
-//! accept, before a byte is read.
-//!
-//! | request | answer |
-//! | --- | --- |
-//! | `GET /` | the page |
-//! | `GET /state.json` | status line, gallery serial and sizes, live entry, live-look hash, objectives, the console sources (`console`: name, priority, universes, `age_s`, `sampling`; null without `[input.sacn]`) |
-//! | `GET /thumb/<serial>/<k>.jpg` | entry k of gallery `serial` (404 once a newer generate replaced it) |
-//! | `GET /live.jpg` | the live look |
-//! | `GET /ref/<id>.jpg` | objective id's reference image, at most 320 px wide |
-//! | `POST /pick/<k>` | `/vo/pick k` through the OSC handler: 200 with the reply, 409 with the error |
+//! Access, in order: the `osc.allow` list on accept (before a byte is read); the `Host`
+//! must be an address, `localhost` or a name in `[http] hosts` (a page on another site that
+//! rebinds its own name to the booth's address cannot reach it); the optional password
+//! (`[http] password`, HTTP Basic); and on every state change (anything but GET and HEAD)
+//! the `Origin` and `Sec-Fetch-Site` a browser sends must be this page's own. GET never
+//! changes anything. Bounded: 32 connections, 10 s for a request head of at most 16 KiB,
+//! 4 KiB of command body, 32 MiB of upload, 60 s per request (the event stream excepted).
 
+use std::convert::Infallible;
 use std::hash::{Hash, Hasher};
 use std::net::SocketAddr;
 use std::sync::Arc;
 use std::time::Duration;
 
+use axum::Router;
+use axum::body::Bytes;
+use axum::extract::{DefaultBodyLimit, Extension, Path as UrlPath, Request, State};
+use axum::http::{HeaderMap, HeaderValue, Method, StatusCode, header};
+use axum::middleware::{self, Next};
+use axum::response::sse::{Event, KeepAlive, Sse};
+use axum::response::{IntoResponse, Response};
+use axum::routing::{get, post, put};
+use base64::Engine as _;
 use rosc::{OscMessage, OscType};
-use serde_json::json;
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
-use tokio::net::{TcpListener, TcpStream};
+use serde_json::{Value, json};
+use tokio::net::TcpListener;
 use tokio::sync::{Mutex, Semaphore};
 
 use crate::config::{Cidr, permits};
-use crate::engine::{Engine, EngineHandler, msg};
+use crate::engine::{Engine, EngineHandler};
 use crate::osc::{Handler, Peer};
 use visobjd_scene::look::Look;
 
-/// Largest request head (request line and headers).
-const MAX_HEAD: usize = 8 * 1024;
-/// Largest request body (a pick needs none).
-const MAX_BODY: usize = 1024;
-/// Time a client has to send its whole request.
-const READ_TIMEOUT: Duration = Duration::from_secs(10);
-/// Time a client has to take the whole answer.
-const WRITE_TIMEOUT: Duration = Duration::from_secs(30);
+/// Largest request head (request line and headers); hyper answers 431 beyond it.
+const MAX_HEAD: usize = 16 * 1024;
+/// Largest command body (`POST /osc`).
+const MAX_COMMAND: usize = 4 * 1024;
+/// Largest upload (`PUT /references/<name>`).
+pub const MAX_UPLOAD: usize = 32 * 1024 * 1024;
+/// Time a client has to send a request head.
+const HEAD_TIMEOUT: Duration = Duration::from_secs(10);
+/// Time a request has to be answered (the body read included); not the event stream.
+const REQUEST_TIMEOUT: Duration = Duration::from_secs(60);
 /// Connections served at once; more are closed at once.
 const MAX_CONNECTIONS: usize = 32;
 /// Width of the reference images on the page.
 const REFERENCE_WIDTH: u32 = 320;
 /// JPEG quality of every picture served.
 const JPEG_QUALITY: u8 = 85;
+/// Pictures kept per cache.
+const CACHED: usize = 64;
 
 const PAGE: &str = include_str!("http_page.html");
 
-/// The running listener; dropping the runtime stops it.
+/// Who may reach the page besides the allow-list (`[http]`, docs/web.md).
+#[derive(Debug, Clone, Default)]
+pub struct Access {
+    /// The password (HTTP Basic, any user name); `None`: none asked.
+    pub password: Option<String>,
+    /// Host names besides addresses and `localhost` the page may be opened by.
+    pub hosts: Vec<String>,
+}
+
+/// The running server; dropping the runtime stops it.
 pub struct Http {
     addr: SocketAddr,
     accept: tokio::task::JoinHandle<()>,
@@ -61,6 +77,7 @@ impl Http {
     pub async fn start(
         listen: &str,
         allow: Vec<Cidr>,
+        access: Access,
         engine: Arc<Engine>,
     ) -> Result<Http, String> {
         let listener = TcpListener::bind(listen)
@@ -71,13 +88,12 @@ impl Http {
             .map_err(|e| format!("http.listen {listen}: {e}"))?;
         let shared = Arc::new(Shared {
             engine,
-            allow,
-            slots: Arc::new(Semaphore::new(MAX_CONNECTIONS)),
+            access,
             thumbs: Mutex::new(None),
-            live: Mutex::new(None),
-            refs: Mutex::new(Vec::new()),
+            renders: Mutex::new(Vec::new()),
+            files: Mutex::new(Vec::new()),
         });
-        let accept = tokio::spawn(accept(listener, shared));
+        let accept = tokio::spawn(accept(listener, allow, router(shared)));
         Ok(Http { addr, accept })
     }
 
@@ -94,25 +110,61 @@ impl Http {
     }
 }
 
-/// An encoded picture, shared between the cache and the answers being sent.
-type Picture = Arc<Vec<u8>>;
+/// An encoded picture, shared between the caches and the answers being sent.
+type Picture = Bytes;
 
-/// Encoded pictures of one gallery, by entry.
+/// Encoded pictures of one gallery's representatives, by entry.
 type Thumbs = (u64, Arc<Vec<Picture>>);
 
 struct Shared {
     engine: Arc<Engine>,
-    allow: Vec<Cidr>,
-    slots: Arc<Semaphore>,
-    /// The current gallery's thumbnails, rendered together on the first request.
+    access: Access,
+    /// The current gallery's thumbnails, encoded together on the first request.
     thumbs: Mutex<Option<Thumbs>>,
-    /// The last live look served and its picture.
-    live: Mutex<Option<(Look, Picture)>>,
-    /// Reference pictures by (objective id, image name).
-    refs: Mutex<Vec<((u32, String), Picture)>>,
+    /// Rendered looks (live, members, history, saved looks, selections), newest last.
+    renders: Mutex<Vec<(Look, Picture)>>,
+    /// Reference images by (file name, size, modified), newest last.
+    files: Mutex<Vec<(FileKey, Picture)>>,
 }
 
-async fn accept(listener: TcpListener, shared: Arc<Shared>) {
+type FileKey = (String, u64, Option<std::time::SystemTime>);
+
+/// The client's address, put on each request by the accept loop.
+#[derive(Clone, Copy)]
+struct Client(SocketAddr);
+
+fn router(shared: Arc<Shared>) -> Router {
+    Router::new()
+        .route("/", get(|| async { page() }))
+        .route("/state.json", get(state_json))
+        .route("/events", get(events))
+        .route("/live.jpg", get(live))
+        .route("/thumb/{serial}/{file}", get(thumb))
+        .route("/thumb/{serial}/{k}/{file}", get(member))
+        .route("/ref/{file}", get(objective_reference))
+        .route("/selected/{file}", get(selected))
+        .route("/history/{file}", get(history))
+        .route("/look/{file}", get(saved_look))
+        .route("/references.json", get(references))
+        .route(
+            "/references/{name}",
+            get(reference_file).merge(put(upload).layer(DefaultBodyLimit::disable())),
+        )
+        .route(
+            "/osc",
+            post(command).layer(DefaultBodyLimit::max(MAX_COMMAND)),
+        )
+        .fallback(|| async { refuse(StatusCode::NOT_FOUND, "not found") })
+        .layer(tower_http::timeout::TimeoutLayer::with_status_code(
+            StatusCode::REQUEST_TIMEOUT,
+            REQUEST_TIMEOUT,
+        ))
+        .layer(middleware::from_fn_with_state(Arc::clone(&shared), guard))
+        .with_state(shared)
+}
+
+async fn accept(listener: TcpListener, allow: Vec<Cidr>, app: Router) {
+    let slots = Arc::new(Semaphore::new(MAX_CONNECTIONS));
     loop {
         let (stream, from) = match listener.accept().await {
             Ok(c) => c,
@@ -122,232 +174,233 @@ async fn accept(listener: TcpListener, shared: Arc<Shared>) {
                 continue;
             }
         };
-        if !permits(&shared.allow, from.ip()) {
+        if !permits(&allow, from.ip()) {
             tracing::info!("http: refused {from}, not in osc.allow");
             continue;
         }
-        let Ok(slot) = Arc::clone(&shared.slots).try_acquire_owned() else {
+        let Ok(slot) = Arc::clone(&slots).try_acquire_owned() else {
             tracing::info!("http: {from} refused, {MAX_CONNECTIONS} connections busy");
             continue;
         };
-        let shared = Arc::clone(&shared);
+        let service = hyper_util::service::TowerToHyperService::new(
+            app.clone().layer(Extension(Client(from))),
+        );
         tokio::spawn(async move {
-            connection(stream, from, &shared).await;
+            let served = hyper::server::conn::http1::Builder::new()
+                .timer(hyper_util::rt::TokioTimer::new())
+                .header_read_timeout(HEAD_TIMEOUT)
+                .max_buf_size(MAX_HEAD)
+                .serve_connection(hyper_util::rt::TokioIo::new(stream), service)
+                .await;
+            if let Err(e) = served {
+                tracing::debug!("http: {from}: {e}");
+            }
             drop(slot);
         });
     }
 }
 
-/// A request: method, path without query, body.
-struct Request {
-    method: String,
-    path: String,
+/// A refusal: its status and a sentence, as `{"error": ...}`.
+fn refuse(status: StatusCode, sentence: &str) -> Response {
+    (status, axum::Json(json!({ "error": sentence }))).into_response()
 }
 
-/// An answer: status, content type, body.
-struct Answer {
-    status: u16,
-    kind: &'static str,
-    body: Arc<Vec<u8>>,
+fn page() -> Response {
+    ([(header::CONTENT_TYPE, "text/html; charset=utf-8")], PAGE).into_response()
 }
 
-impl Answer {
-    fn new(status: u16, kind: &'static str, body: Vec<u8>) -> Answer {
-        Answer {
-            status,
-            kind,
-            body: Arc::new(body),
+/// The access rules every request passes (module header), and headers every answer gets:
+/// nothing cached, nothing sniffed, never framed by another page.
+async fn guard(State(sh): State<Arc<Shared>>, req: Request, next: Next) -> Response {
+    if let Err(refusal) = admit(&sh.access, req.method(), req.headers()) {
+        let from = req.extensions().get::<Client>().map(|c| c.0);
+        tracing::info!(
+            "http: {} {} from {from:?} refused: {}",
+            req.method(),
+            req.uri().path(),
+            refusal.1
+        );
+        let mut r = refuse(refusal.0, &refusal.1);
+        if refusal.0 == StatusCode::UNAUTHORIZED {
+            r.headers_mut().insert(
+                header::WWW_AUTHENTICATE,
+                HeaderValue::from_static("Basic realm=\"visobjd\", charset=\"UTF-8\""),
+            );
         }
+        return r;
     }
-
-    fn json(status: u16, v: serde_json::Value) -> Answer {
-        Answer::new(status, "application/json", v.to_string().into_bytes())
-    }
-
-    fn jpeg(body: Arc<Vec<u8>>) -> Answer {
-        Answer {
-            status: 200,
-            kind: "image/jpeg",
-            body,
-        }
-    }
-
-    fn text(status: u16, s: &str) -> Answer {
-        Answer::new(
-            status,
-            "text/plain; charset=utf-8",
-            format!("{s}\n").into_bytes(),
-        )
-    }
-}
-
-async fn connection(mut stream: TcpStream, from: SocketAddr, shared: &Shared) {
-    let answer = match tokio::time::timeout(READ_TIMEOUT, read_request(&mut stream)).await {
-        Err(_) => Answer::text(408, "the request took too long"),
-        Ok(Err(a)) => a,
-        Ok(Ok(req)) => route(&req, from, shared).await,
-    };
-    let reason = match answer.status {
-        200 => "OK",
-        400 => "Bad Request",
-        404 => "Not Found",
-        405 => "Method Not Allowed",
-        408 => "Request Timeout",
-        409 => "Conflict",
-        413 => "Content Too Large",
-        431 => "Request Header Fields Too Large",
-        _ => "Internal Server Error",
-    };
-    let head = format!(
-        "HTTP/1.1 {} {reason}\r\nContent-Type: {}\r\nContent-Length: {}\r\nCache-Control: no-store\r\nConnection: close\r\n\r\n",
-        answer.status,
-        answer.kind,
-        answer.body.len()
+    let mut r = next.run(req).await;
+    let h = r.headers_mut();
+    h.insert(header::CACHE_CONTROL, HeaderValue::from_static("no-store"));
+    h.insert(
+        header::X_CONTENT_TYPE_OPTIONS,
+        HeaderValue::from_static("nosniff"),
     );
-    let write = async {
-        stream.write_all(head.as_bytes()).await?;
-        stream.write_all(&answer.body).await?;
-        stream.shutdown().await?;
-        // A lingering close: what the client still sends (a refused request's rest) is
-        // read and dropped, bounded, so the close does not reset the answer away.
-        let mut sink = [0u8; 4096];
-        let mut left: usize = 64 * 1024;
-        while left > 0 {
-            match tokio::time::timeout(Duration::from_secs(1), stream.read(&mut sink)).await {
-                Ok(Ok(n)) if n > 0 => left = left.saturating_sub(n),
-                _ => break,
-            }
-        }
-        Ok(())
-    };
-    if let Ok(Err(e)) | Err(e) = tokio::time::timeout(WRITE_TIMEOUT, write)
-        .await
-        .map_err(std::io::Error::other)
-    {
-        tracing::debug!("http: {from}: {e}");
-    }
+    h.insert(header::X_FRAME_OPTIONS, HeaderValue::from_static("DENY"));
+    h.insert(
+        header::CONTENT_SECURITY_POLICY,
+        HeaderValue::from_static(
+            "default-src 'self'; script-src 'unsafe-inline'; style-src 'unsafe-inline'; img-src 'self' blob:; frame-ancestors 'none'",
+        ),
+    );
+    r
 }
 
-/// Reads at least one byte of `what` into `chunk`: a failed read or an early end is
-/// answered 400.
-async fn read_some(stream: &mut TcpStream, chunk: &mut [u8], what: &str) -> Result<usize, Answer> {
-    match stream.read(chunk).await {
-        Ok(0) => Err(Answer::text(400, &format!("{what} ended early"))),
-        Ok(n) => Ok(n),
-        Err(_) => Err(Answer::text(400, &format!("{what} could not be read"))),
+/// Whether a request may go on: Host, password, and for a state change its origin.
+fn admit(
+    access: &Access,
+    method: &Method,
+    headers: &HeaderMap,
+) -> Result<(), (StatusCode, String)> {
+    let text = |name: header::HeaderName| headers.get(name).and_then(|v| v.to_str().ok());
+    let host = text(header::HOST).unwrap_or_default();
+    if !host_allowed(host, &access.hosts) {
+        return Err((
+            StatusCode::FORBIDDEN,
+            format!(
+                "Host `{host}` is not this daemon: open the page by its IP address, localhost, or a name listed in [http] hosts"
+            ),
+        ));
     }
-}
-
-/// Reads one request within the size limits; the error is the answer to give.
-async fn read_request(stream: &mut TcpStream) -> Result<Request, Answer> {
-    let mut buf = Vec::with_capacity(1024);
-    let mut chunk = [0u8; 1024];
-    let head_end = loop {
-        let end = buf.windows(4).position(|w| w == b"\r\n\r\n").map(|i| i + 4);
-        if end.unwrap_or(buf.len()) > MAX_HEAD {
-            return Err(Answer::text(431, "request head over 8 KiB"));
-        }
-        if let Some(end) = end {
-            break end;
-        }
-        let n = read_some(stream, &mut chunk, "the request").await?;
-        buf.extend_from_slice(&chunk[..n]);
-    };
-    let head = std::str::from_utf8(&buf[..head_end])
-        .map_err(|_| Answer::text(400, "the request head is not text"))?;
-    let mut lines = head.split("\r\n");
-    let mut first = lines.next().unwrap_or_default().split(' ');
-    let (Some(method), Some(target), Some(version)) = (first.next(), first.next(), first.next())
-    else {
-        return Err(Answer::text(400, "not an HTTP request line"));
-    };
-    if !version.starts_with("HTTP/1.") {
-        return Err(Answer::text(400, "HTTP/1.x only"));
-    }
-    let length = lines
-        .filter_map(|l| l.split_once(':'))
-        .find(|(k, _)| k.trim().eq_ignore_ascii_case("content-length"))
-        .map(|(_, v)| v.trim().parse::<usize>())
-        .transpose()
-        .map_err(|_| Answer::text(400, "Content-Length is not a number"))?
-        .unwrap_or(0);
-    if length > MAX_BODY {
-        return Err(Answer::text(413, "request body over 1 KiB"));
-    }
-    // The body is read (and ignored) so closing the connection does not reset it.
-    let mut have = buf.len() - head_end;
-    while have < length {
-        have += read_some(stream, &mut chunk, "the request body").await?;
-    }
-    Ok(Request {
-        method: method.to_string(),
-        path: target.split('?').next().unwrap_or_default().to_string(),
-    })
-}
-
-async fn route(req: &Request, from: SocketAddr, shared: &Shared) -> Answer {
-    let segments: Vec<&str> = req.path.split('/').filter(|s| !s.is_empty()).collect();
-    match (req.method.as_str(), segments.as_slice()) {
-        ("GET", []) => Answer::new(200, "text/html; charset=utf-8", PAGE.as_bytes().to_vec()),
-        ("GET", ["state.json"]) => Answer::json(200, state(&shared.engine)),
-        ("GET", ["live.jpg"]) => live(shared).await,
-        ("GET", ["thumb", serial, file]) => match (serial.parse::<u64>(), number_jpg(file)) {
-            (Ok(serial), Some(k)) => thumb(shared, serial, k).await,
-            _ => Answer::text(404, "no such thumbnail"),
-        },
-        ("GET", ["ref", file]) => match number_jpg(file) {
-            Some(id) => reference(shared, id).await,
-            None => Answer::text(404, "no such reference"),
-        },
-        ("POST", ["pick", k]) => match k.parse::<i32>() {
-            Ok(k) => pick(shared, from, k).await,
-            Err(_) => Answer::text(404, "pick takes an entry number: POST /pick/3"),
-        },
-        ("GET" | "POST", _) => Answer::text(404, "not found"),
-        _ => Answer::text(405, "GET and POST only"),
-    }
-}
-
-/// `7.jpg` gives 7.
-fn number_jpg<T: std::str::FromStr>(file: &str) -> Option<T> {
-    file.strip_suffix(".jpg")?.parse().ok()
-}
-
-/// What the page shows, as JSON. The session is held only to copy the few values out;
-/// the JSON is built after it is released.
-fn state(e: &Engine) -> serde_json::Value {
-    let (status, live, gallery, entry, objectives) = {
-        let s = e.session();
-        let mut hasher = std::collections::hash_map::DefaultHasher::new();
-        for l in &s.live.levels {
-            l.intensity.to_bits().hash(&mut hasher);
-            l.color.map(f32::to_bits).hash(&mut hasher);
-        }
-        let gallery = s.gallery.as_ref().map(|g| {
-            let sizes: Vec<usize> = g.generation.entries.iter().map(Vec::len).collect();
-            (g.serial, g.seed, sizes)
-        });
-        let objectives: Vec<(u32, String, &'static str, [f32; 4])> = s
-            .objectives
-            .iter()
-            .map(|o| {
-                let r = o.objective.region;
-                (
-                    o.id,
-                    o.objective.image.clone(),
-                    o.objective.aspects.name(),
-                    [r.x0, r.y0, r.x1, r.y1],
-                )
+    if let Some(password) = &access.password {
+        let given = text(header::AUTHORIZATION)
+            .and_then(|v| v.strip_prefix("Basic "))
+            .and_then(|b| {
+                base64::engine::general_purpose::STANDARD
+                    .decode(b.trim())
+                    .ok()
             })
-            .collect();
-        (
-            e.status_text(&s),
-            hasher.finish(),
-            gallery,
-            s.entry.unwrap_or((0, 0)),
-            objectives,
-        )
+            .and_then(|raw| String::from_utf8(raw).ok());
+        let ok = given
+            .as_deref()
+            .and_then(|up| up.split_once(':'))
+            .is_some_and(|(_, p)| same(p.as_bytes(), password.as_bytes()));
+        if !ok {
+            return Err((
+                StatusCode::UNAUTHORIZED,
+                "the password is missing or wrong ([http] password)".into(),
+            ));
+        }
+    }
+    if method == Method::GET || method == Method::HEAD {
+        return Ok(());
+    }
+    if let Some(origin) = text(header::ORIGIN)
+        && !origin.eq_ignore_ascii_case(&format!("http://{host}"))
+    {
+        return Err((
+            StatusCode::FORBIDDEN,
+            format!(
+                "a change from the page of `{origin}` is refused: only this daemon's own page may change the rig"
+            ),
+        ));
+    }
+    if let Some(site) = headers.get("sec-fetch-site").and_then(|v| v.to_str().ok())
+        && site != "same-origin"
+        && site != "none"
+    {
+        return Err((
+            StatusCode::FORBIDDEN,
+            format!("a {site} change is refused: only this daemon's own page may change the rig"),
+        ));
+    }
+    Ok(())
+}
+
+/// A `Host` header naming an IP address, `localhost` or one of `hosts`, with any port.
+fn host_allowed(host: &str, hosts: &[String]) -> bool {
+    let name = match host.strip_prefix('[') {
+        Some(rest) => match rest.split_once(']') {
+            Some((v6, port)) if port.is_empty() || port.starts_with(':') => v6,
+            _ => return false,
+        },
+        None => match host.rsplit_once(':') {
+            Some((name, port)) if port.bytes().all(|b| b.is_ascii_digit()) => name,
+            Some(_) => return false,
+            None => host,
+        },
     };
+    !name.is_empty()
+        && (name.parse::<std::net::IpAddr>().is_ok()
+            || name.eq_ignore_ascii_case("localhost")
+            || hosts.iter().any(|h| h.eq_ignore_ascii_case(name)))
+}
+
+/// Equal bytes, in time that does not depend on where they differ.
+fn same(a: &[u8], b: &[u8]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
+}
+
+async fn state_json(State(sh): State<Arc<Shared>>) -> Response {
+    axum::Json(state(&sh.engine)).into_response()
+}
+
+/// A short hash of a look, so the page fetches a picture again only when it changed.
+fn look_key(look: &Look) -> String {
+    let mut hasher = std::collections::hash_map::DefaultHasher::new();
+    for l in &look.levels {
+        l.intensity.to_bits().hash(&mut hasher);
+        l.color.map(f32::to_bits).hash(&mut hasher);
+    }
+    format!("{:016x}", hasher.finish())
+}
+
+/// What the page shows, as JSON. The session is held only to build it (no I/O).
+fn state(e: &Engine) -> Value {
+    let scene = &e.stage.scene;
+    let s = e.session();
+    let (undo, redo, _) = s.history();
+    let lights: Vec<Value> = scene
+        .lights
+        .iter()
+        .enumerate()
+        .map(|(i, l)| {
+            let lv = s.live.levels[i];
+            json!({
+                "ch": l.channel,
+                "name": l.name,
+                "group": scene.groups[l.group].name,
+                "colour": scene.profile(i).has_colour(),
+                "intensity": lv.intensity,
+                "color": lv.color,
+                "lock": s.locked_lights[i],
+            })
+        })
+        .collect();
+    let groups: Vec<Value> = scene
+        .groups
+        .iter()
+        .enumerate()
+        .map(|(g, group)| {
+            let n = group.lights.len().max(1) as f32;
+            json!({
+                "name": group.name,
+                "lights": group.lights.iter().map(|&l| scene.lights[l].channel).collect::<Vec<_>>(),
+                "intensity": group.lights.iter().map(|&l| s.live.levels[l].intensity).sum::<f32>() / n,
+                "key": s.key_groups[g],
+                "lock": s.locked_groups[g],
+            })
+        })
+        .collect();
+    let objectives: Vec<Value> = s
+        .objectives
+        .iter()
+        .map(|o| {
+            let r = o.objective.region;
+            let chosen = e.stage.footprints.select(r);
+            json!({
+                "id": o.id,
+                "image": o.objective.image,
+                "aspects": o.objective.aspects.name(),
+                "region": [r.x0, r.y0, r.x1, r.y1],
+                "palette": o.objective.analysis.palette.iter().map(|p| {
+                    json!([p.color[0], p.color[1], p.color[2], p.weight])
+                }).collect::<Vec<_>>(),
+                "selected": scene.lights.iter().zip(&chosen)
+                    .filter(|(_, on)| **on).map(|(l, _)| l.channel).collect::<Vec<_>>(),
+            })
+        })
+        .collect();
     let output = e.output_stats().map(|h| {
         json!({
             "fps": h.tick_rate,
@@ -373,28 +426,164 @@ fn state(e: &Engine) -> serde_json::Value {
             })
             .collect::<Vec<_>>()
     });
+    let entry = s.entry.unwrap_or((0, 0));
     json!({
-        "scene": e.stage.scene.name,
+        "scene": scene.name,
         "aspect": e.stage.thumbs.width as f32 / e.stage.thumbs.height.max(1) as f32,
-        "status": status,
+        "status": e.status_text(&s),
         "output": output,
         "console": console,
         "generating": e.is_generating(),
-        "gallery": gallery.map(|(serial, seed, sizes)| json!({
-            "serial": serial,
-            "seed": seed,
-            "sizes": sizes,
+        "gallery": s.gallery.as_ref().map(|g| json!({
+            "serial": g.serial,
+            "seed": g.seed,
+            "sizes": g.generation.entries.iter().map(Vec::len).collect::<Vec<_>>(),
         })),
         "entry": entry.0,
         "member": entry.1,
-        "live": format!("{live:016x}"),
-        "objectives": objectives.into_iter().map(|(id, image, aspects, region)| json!({
-            "id": id,
-            "image": image,
-            "aspects": aspects,
-            "region": region,
+        "live": look_key(&s.live),
+        "fade": s.fade_s,
+        "master": s.master,
+        "blackout": s.blackout,
+        "history": {
+            "undo": undo.iter().rev().map(look_key).collect::<Vec<_>>(),
+            "redo": redo.iter().rev().map(look_key).collect::<Vec<_>>(),
+        },
+        "looks": s.looks.iter().map(|(n, f)| json!({
+            "n": n,
+            "label": f.label,
+            "key": f.to_look(scene).map(|l| look_key(&l)).unwrap_or_default(),
         })).collect::<Vec<_>>(),
+        "lights": lights,
+        "groups": groups,
+        "objectives": objectives,
     })
+}
+
+/// Every change the engine pushes to tablets, as server-sent events: one event per push,
+/// its data the messages as `[{"address": ..., "args": [...]}]` (`[]` when the page fell
+/// behind or the change pushes nothing to tablets: read `/state.json` again).
+async fn events(State(sh): State<Arc<Shared>>) -> Response {
+    let changes = sh.engine.changes();
+    let stream = futures_util::stream::unfold(changes, |mut rx| async move {
+        use tokio::sync::broadcast::error::RecvError;
+        let data = match rx.recv().await {
+            Ok(msgs) => Value::Array(msgs.iter().map(message_json).collect()),
+            Err(RecvError::Lagged(_)) => json!([]),
+            Err(RecvError::Closed) => return None,
+        };
+        Some((
+            Ok::<_, Infallible>(Event::default().data(data.to_string())),
+            rx,
+        ))
+    });
+    Sse::new(stream)
+        .keep_alive(KeepAlive::default())
+        .into_response()
+}
+
+/// An OSC message as JSON: `{"address": "/vo/picked", "args": [2, 1]}`.
+fn message_json(m: &OscMessage) -> Value {
+    let args: Vec<Value> = m
+        .args
+        .iter()
+        .map(|a| match a {
+            OscType::Int(i) => json!(i),
+            OscType::Long(i) => json!(i),
+            OscType::Float(f) => json!(f),
+            OscType::Double(f) => json!(f),
+            OscType::String(s) => json!(s),
+            OscType::Bool(b) => json!(b),
+            other => json!(format!("{other:?}")),
+        })
+        .collect();
+    json!({ "address": m.addr, "args": args })
+}
+
+/// A command from the page: an OSC address under `/vo/` and its arguments.
+#[derive(serde::Deserialize)]
+struct Call {
+    address: String,
+    #[serde(default)]
+    args: Vec<Value>,
+}
+
+/// Addresses the page may not send: they set up links between daemons or subscriptions
+/// to the sender's UDP port, which a browser does not have.
+const NOT_FROM_THE_PAGE: [&str; 3] = ["/vo/backup/", "/vo/subscribe", "/vo/unsubscribe"];
+
+/// `POST /osc`: runs the command through the OSC handler as if the browser's host had sent
+/// it: 200 with the replies, 409 with the `/vo/error` sentence (nothing changed).
+async fn command(
+    State(sh): State<Arc<Shared>>,
+    Extension(Client(from)): Extension<Client>,
+    call: Result<axum::Json<Call>, axum::extract::rejection::JsonRejection>,
+) -> Response {
+    let call = match call {
+        Ok(axum::Json(c)) => c,
+        Err(e) => {
+            return refuse(
+                e.status(),
+                &format!(
+                    "a command is JSON {{\"address\": \"/vo/...\", \"args\": [...]}}: {}",
+                    e.body_text()
+                ),
+            );
+        }
+    };
+    let lower = call.address.to_ascii_lowercase();
+    if !lower.starts_with("/vo/") || NOT_FROM_THE_PAGE.iter().any(|p| lower.starts_with(p)) {
+        return refuse(
+            StatusCode::FORBIDDEN,
+            &format!("{} cannot be sent from the page", call.address),
+        );
+    }
+    let mut args = Vec::with_capacity(call.args.len());
+    for a in &call.args {
+        args.push(match a {
+            Value::Number(n) => match n.as_i64().and_then(|i| i32::try_from(i).ok()) {
+                Some(i) => OscType::Int(i),
+                None => OscType::Float(n.as_f64().unwrap_or(f64::NAN) as f32),
+            },
+            Value::String(s) => OscType::String(s.clone()),
+            Value::Bool(b) => OscType::Bool(*b),
+            other => {
+                return refuse(
+                    StatusCode::BAD_REQUEST,
+                    &format!(
+                        "{}: an argument is a number, a string or true/false, not {other}",
+                        call.address
+                    ),
+                );
+            }
+        });
+    }
+    let message = OscMessage {
+        addr: call.address.clone(),
+        args,
+    };
+    let handler = EngineHandler(Arc::clone(&sh.engine));
+    let (peer, _later) = Peer::capture(from);
+    let Some(replies) =
+        blocking(move || handler.handle(crate::osc::args::Request::new(message), &peer)).await
+    else {
+        return refuse(StatusCode::INTERNAL_SERVER_ERROR, "the command failed");
+    };
+    let listed: Vec<Value> = replies.iter().map(message_json).collect();
+    match replies.iter().find(|m| m.addr == "/vo/error") {
+        Some(m) => {
+            let sentence = match m.args.get(1) {
+                Some(OscType::String(s)) => s.clone(),
+                _ => "refused".into(),
+            };
+            (
+                StatusCode::CONFLICT,
+                axum::Json(json!({ "error": sentence, "replies": listed })),
+            )
+                .into_response()
+        }
+        None => axum::Json(json!({ "replies": listed })).into_response(),
+    }
 }
 
 /// Renders and encodes off the runtime's threads.
@@ -412,49 +601,30 @@ fn encode_jpeg(img: &image::RgbImage) -> Vec<u8> {
     out
 }
 
-async fn thumb(shared: &Shared, serial: u64, k: usize) -> Answer {
-    let mut cache = shared.thumbs.lock().await;
-    let current = match cache.as_ref() {
-        Some((s, pics)) if *s == serial => Arc::clone(pics),
-        _ => {
-            // The representatives' thumbnails were rendered with the gallery.
-            let thumbs = {
-                let s = shared.engine.session();
-                match s.gallery.as_ref() {
-                    Some(g) if g.serial == serial => Arc::clone(&g.generation.thumbnails),
-                    _ => return Answer::text(404, "that gallery was replaced by a newer one"),
-                }
-            };
-            let Some(pics) = blocking(move || {
-                thumbs
-                    .iter()
-                    .map(|img| Arc::new(encode_jpeg(img)))
-                    .collect::<Vec<_>>()
-            })
-            .await
-            else {
-                return Answer::text(500, "the encoding failed");
-            };
-            let pics = Arc::new(pics);
-            *cache = Some((serial, Arc::clone(&pics)));
-            pics
-        }
-    };
-    match k.checked_sub(1).and_then(|i| current.get(i)) {
-        Some(pic) => Answer::jpeg(Arc::clone(pic)),
-        None => Answer::text(404, "no such entry"),
-    }
+fn jpeg(pic: Picture) -> Response {
+    ([(header::CONTENT_TYPE, "image/jpeg")], pic).into_response()
 }
 
-async fn live(shared: &Shared) -> Answer {
-    let look = shared.engine.session().live.clone();
-    let mut cache = shared.live.lock().await;
-    if let Some((l, pic)) = cache.as_ref()
-        && *l == look
-    {
-        return Answer::jpeg(Arc::clone(pic));
+/// Keeps `value` under `key` in a cache of at most [`CACHED`] entries, oldest dropped.
+fn keep<K>(cache: &mut Vec<(K, Picture)>, key: K, value: &Picture) {
+    if cache.len() >= CACHED {
+        cache.remove(0);
     }
-    let engine = Arc::clone(&shared.engine);
+    cache.push((key, value.clone()));
+}
+
+/// `7.jpg` gives 7.
+fn number_jpg<T: std::str::FromStr>(file: &str) -> Option<T> {
+    file.strip_suffix(".jpg")?.parse().ok()
+}
+
+/// A look as the stage picture, from the cache or rendered.
+async fn render(sh: &Shared, look: Look) -> Response {
+    let mut cache = sh.renders.lock().await;
+    if let Some((_, pic)) = cache.iter().find(|(l, _)| *l == look) {
+        return jpeg(pic.clone());
+    }
+    let engine = Arc::clone(&sh.engine);
     let rendered = look.clone();
     let Some(pic) = blocking(move || {
         engine
@@ -466,33 +636,206 @@ async fn live(shared: &Shared) -> Answer {
     })
     .await
     else {
-        return Answer::text(500, "the render failed");
+        return refuse(StatusCode::INTERNAL_SERVER_ERROR, "the render failed");
     };
-    let pic = Arc::new(pic);
-    *cache = Some((look, Arc::clone(&pic)));
-    Answer::jpeg(pic)
+    let pic = Bytes::from(pic);
+    keep(&mut cache, look, &pic);
+    jpeg(pic)
 }
 
-async fn reference(shared: &Shared, id: u32) -> Answer {
-    let Some(image) = shared
-        .engine
-        .session()
-        .objectives
-        .iter()
-        .find(|o| o.id == id)
-        .map(|o| o.objective.image.clone())
-    else {
-        return Answer::text(404, "no such objective");
+async fn live(State(sh): State<Arc<Shared>>) -> Response {
+    let look = sh.engine.session().live.clone();
+    render(&sh, look).await
+}
+
+async fn thumb(
+    State(sh): State<Arc<Shared>>,
+    UrlPath((serial, file)): UrlPath<(String, String)>,
+) -> Response {
+    let (Ok(serial), Some(k)) = (serial.parse::<u64>(), number_jpg::<usize>(&file)) else {
+        return refuse(StatusCode::NOT_FOUND, "no such thumbnail");
     };
-    let key = (id, image.clone());
-    let mut cache = shared.refs.lock().await;
-    if let Some((_, pic)) = cache.iter().find(|(k, _)| *k == key) {
-        return Answer::jpeg(Arc::clone(pic));
+    let mut cache = sh.thumbs.lock().await;
+    let current = match cache.as_ref() {
+        Some((s, pics)) if *s == serial => Arc::clone(pics),
+        _ => {
+            // The representatives' thumbnails were rendered with the gallery.
+            let thumbs = {
+                let s = sh.engine.session();
+                match s.gallery.as_ref() {
+                    Some(g) if g.serial == serial => Arc::clone(&g.generation.thumbnails),
+                    _ => {
+                        return refuse(
+                            StatusCode::NOT_FOUND,
+                            "that gallery was replaced by a newer one",
+                        );
+                    }
+                }
+            };
+            let Some(pics) = blocking(move || {
+                thumbs
+                    .iter()
+                    .map(|img| Bytes::from(encode_jpeg(img)))
+                    .collect::<Vec<_>>()
+            })
+            .await
+            else {
+                return refuse(StatusCode::INTERNAL_SERVER_ERROR, "the encoding failed");
+            };
+            let pics = Arc::new(pics);
+            *cache = Some((serial, Arc::clone(&pics)));
+            pics
+        }
+    };
+    match k.checked_sub(1).and_then(|i| current.get(i)) {
+        Some(pic) => jpeg(pic.clone()),
+        None => refuse(StatusCode::NOT_FOUND, "no such entry"),
     }
-    let path = match crate::engine::resolve_reference(shared.engine.references(), &image) {
-        Ok(p) => p,
-        Err(e) => return Answer::text(404, &e),
+}
+
+/// Member m of entry k of gallery `serial`, rendered on demand.
+async fn member(
+    State(sh): State<Arc<Shared>>,
+    UrlPath((serial, k, file)): UrlPath<(String, String, String)>,
+) -> Response {
+    let (Ok(serial), Ok(k), Some(m)) = (
+        serial.parse::<u64>(),
+        k.parse::<usize>(),
+        number_jpg::<usize>(&file),
+    ) else {
+        return refuse(StatusCode::NOT_FOUND, "no such member");
     };
+    let look = {
+        let s = sh.engine.session();
+        if s.gallery.as_ref().map(|g| g.serial) != Some(serial) {
+            return refuse(
+                StatusCode::NOT_FOUND,
+                "that gallery was replaced by a newer one",
+            );
+        }
+        crate::engine::gallery_look(&s, k, m)
+    };
+    match look {
+        Ok(look) => render(&sh, look).await,
+        Err(e) => refuse(StatusCode::NOT_FOUND, &e),
+    }
+}
+
+/// Undo step i (`u1.jpg`: one step back) or redo step i (`r1.jpg`).
+async fn history(State(sh): State<Arc<Shared>>, UrlPath(file): UrlPath<String>) -> Response {
+    let look = {
+        let s = sh.engine.session();
+        let (undo, redo, _) = s.history();
+        let pick = |list: &[Look], i: &str| {
+            let i: usize = i.parse().ok()?;
+            list.len().checked_sub(i).and_then(|j| list.get(j)).cloned()
+        };
+        let name = file.strip_suffix(".jpg").unwrap_or_default();
+        match name.split_at_checked(1) {
+            Some(("u", i)) => pick(undo, i),
+            Some(("r", i)) => pick(redo, i),
+            _ => None,
+        }
+    };
+    match look {
+        Some(look) => render(&sh, look).await,
+        None => refuse(StatusCode::NOT_FOUND, "no such history step"),
+    }
+}
+
+/// Saved look n.
+async fn saved_look(State(sh): State<Arc<Shared>>, UrlPath(file): UrlPath<String>) -> Response {
+    let Some(n) = number_jpg::<u32>(&file) else {
+        return refuse(StatusCode::NOT_FOUND, "no such look");
+    };
+    let look = {
+        let s = sh.engine.session();
+        s.looks.get(&n).map(|f| f.to_look(&sh.engine.stage.scene))
+    };
+    match look {
+        Some(Ok(look)) => render(&sh, look).await,
+        Some(Err(e)) => refuse(StatusCode::NOT_FOUND, &e),
+        None => refuse(
+            StatusCode::NOT_FOUND,
+            &format!("there is no saved look {n}"),
+        ),
+    }
+}
+
+/// The lights objective id's region selects, at full in white (what its region reaches).
+async fn selected(State(sh): State<Arc<Shared>>, UrlPath(file): UrlPath<String>) -> Response {
+    let Some(id) = number_jpg::<u32>(&file) else {
+        return refuse(StatusCode::NOT_FOUND, "no such objective");
+    };
+    let region = {
+        let s = sh.engine.session();
+        s.objectives
+            .iter()
+            .find(|o| o.id == id)
+            .map(|o| o.objective.region)
+    };
+    let Some(region) = region else {
+        return refuse(StatusCode::NOT_FOUND, "no such objective");
+    };
+    let chosen = sh.engine.stage.footprints.select(region);
+    let mut look = Look::off(chosen.len());
+    for (level, on) in look.levels.iter_mut().zip(chosen) {
+        if on {
+            level.intensity = 1.0;
+            level.color = [1.0, 1.0, 1.0];
+        }
+    }
+    render(&sh, look).await
+}
+
+/// The image files of the references folder, by name.
+async fn references(State(sh): State<Arc<Shared>>) -> Response {
+    match sh.engine.reference_names() {
+        Ok(names) => axum::Json(json!({ "references": names })).into_response(),
+        Err(e) => refuse(StatusCode::INTERNAL_SERVER_ERROR, &e),
+    }
+}
+
+/// Objective id's reference image, at most [`REFERENCE_WIDTH`] wide.
+async fn objective_reference(
+    State(sh): State<Arc<Shared>>,
+    UrlPath(file): UrlPath<String>,
+) -> Response {
+    let image = number_jpg::<u32>(&file).and_then(|id| {
+        sh.engine
+            .session()
+            .objectives
+            .iter()
+            .find(|o| o.id == id)
+            .map(|o| o.objective.image.clone())
+    });
+    match image {
+        Some(image) => reference_picture(&sh, image).await,
+        None => refuse(StatusCode::NOT_FOUND, "no such objective"),
+    }
+}
+
+async fn reference_file(State(sh): State<Arc<Shared>>, UrlPath(name): UrlPath<String>) -> Response {
+    reference_picture(&sh, name).await
+}
+
+/// A reference image by name, checked and decoded as an objective's is, at most
+/// [`REFERENCE_WIDTH`] wide; cached while the file keeps its size and time.
+async fn reference_picture(sh: &Shared, name: String) -> Response {
+    let path = match crate::engine::resolve_reference(sh.engine.references(), &name) {
+        Ok(p) => p,
+        Err(e) => return refuse(StatusCode::NOT_FOUND, &e),
+    };
+    let meta = std::fs::metadata(&path).ok();
+    let key: FileKey = (
+        name.clone(),
+        meta.as_ref().map_or(0, std::fs::Metadata::len),
+        meta.and_then(|m| m.modified().ok()),
+    );
+    let mut cache = sh.files.lock().await;
+    if let Some((_, pic)) = cache.iter().find(|(k, _)| *k == key) {
+        return jpeg(pic.clone());
+    }
     let decoded = blocking(move || {
         visobjd_method::objective::decode_reference(&path).map(|img| {
             let (w, h) = img.dimensions();
@@ -508,51 +851,156 @@ async fn reference(shared: &Shared, id: u32) -> Answer {
     .await;
     match decoded {
         Some(Ok(pic)) => {
-            let pic = Arc::new(pic);
-            // Objectives come and go; a few dozen pictures at most are kept.
-            if cache.len() >= 32 {
-                cache.remove(0);
-            }
-            cache.push((key, Arc::clone(&pic)));
-            Answer::jpeg(pic)
+            let pic = Bytes::from(pic);
+            keep(&mut cache, key, &pic);
+            jpeg(pic)
         }
-        Some(Err(e)) => Answer::text(404, &format!("{image} {e}")),
-        None => Answer::text(500, "the reference could not be read"),
+        Some(Err(e)) => refuse(StatusCode::NOT_FOUND, &format!("{name} {e}")),
+        None => refuse(
+            StatusCode::INTERNAL_SERVER_ERROR,
+            "the reference could not be read",
+        ),
     }
 }
 
-/// `/vo/pick k` through the OSC handler, as if the browser's host had sent it.
-async fn pick(shared: &Shared, from: SocketAddr, k: i32) -> Answer {
-    let handler = EngineHandler(Arc::clone(&shared.engine));
-    let (peer, _replies) = Peer::capture(from);
-    let Some(replies) = blocking(move || {
-        let pick = crate::osc::args::Request::new(msg("/vo/pick", vec![OscType::Int(k)]));
-        handler.handle(pick, &peer)
-    })
-    .await
-    else {
-        return Answer::text(500, "the pick failed");
+/// `PUT /references/<name>`: a new reference image, checked as every reference is and
+/// stored atomically; never replaces one (objectives may be using it).
+async fn upload(
+    State(sh): State<Arc<Shared>>,
+    UrlPath(name): UrlPath<String>,
+    req: Request,
+) -> Response {
+    let too_big = || {
+        let sentence = format!(
+            "upload `{name}`: an upload is at most {} MiB",
+            MAX_UPLOAD >> 20
+        );
+        tracing::info!("http: {sentence}");
+        refuse(StatusCode::PAYLOAD_TOO_LARGE, &sentence)
     };
-    // Replies as words: "/vo/picked 2 1"; an error's sentence alone.
-    let words = |m: &OscMessage| -> Vec<String> {
-        m.args
-            .iter()
-            .map(|a| match a {
-                OscType::String(s) => s.clone(),
-                OscType::Int(i) => i.to_string(),
-                other => format!("{other:?}"),
-            })
-            .collect()
-    };
-    match replies.first() {
-        Some(m) if m.addr == "/vo/error" => {
-            let sentence = words(m).get(1).cloned().unwrap_or_default();
-            Answer::json(409, json!({ "error": sentence }))
+    // A declared length over the limit is refused before a byte of it is read.
+    let declared = req
+        .headers()
+        .get(header::CONTENT_LENGTH)
+        .and_then(|v| v.to_str().ok()?.parse::<u64>().ok());
+    if declared.is_some_and(|n| n > MAX_UPLOAD as u64) {
+        return too_big();
+    }
+    let bytes = match axum::body::to_bytes(req.into_body(), MAX_UPLOAD).await {
+        Ok(b) => b,
+        Err(_) if declared.is_none() => return too_big(),
+        Err(e) => {
+            let sentence = format!("upload `{name}`: the upload could not be read: {e}");
+            tracing::info!("http: {sentence}");
+            return refuse(StatusCode::BAD_REQUEST, &sentence);
         }
-        Some(m) => Answer::json(
-            200,
-            json!({ "reply": format!("{} {}", m.addr, words(m).join(" ")) }),
-        ),
-        None => Answer::json(500, json!({ "error": "no reply" })),
+    };
+    let engine = Arc::clone(&sh.engine);
+    let stored = blocking(move || engine.store_reference(&name, &bytes)).await;
+    match stored {
+        Some(Ok(name)) => {
+            (StatusCode::CREATED, axum::Json(json!({ "stored": name }))).into_response()
+        }
+        Some(Err((exists, e))) => {
+            tracing::info!("http: upload refused: {e}");
+            let status = if exists {
+                StatusCode::CONFLICT
+            } else {
+                StatusCode::BAD_REQUEST
+            };
+            refuse(status, &e)
+        }
+        None => refuse(StatusCode::INTERNAL_SERVER_ERROR, "the upload failed"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hosts_are_addresses_localhost_or_listed() {
+        let listed = vec!["booth.local".to_string()];
+        for ok in [
+            "127.0.0.1:8080",
+            "10.0.0.5",
+            "[::1]:8080",
+            "[fe80::1]",
+            "localhost:80",
+            "LOCALHOST",
+            "booth.local:8080",
+        ] {
+            assert!(host_allowed(ok, &listed), "{ok}");
+        }
+        for bad in [
+            "",
+            "evil.example",
+            "evil.example:8080",
+            "127.0.0.1.evil.example",
+            "[::1",
+            "[::1]x",
+            "localhost:http",
+            ":8080",
+        ] {
+            assert!(!host_allowed(bad, &listed), "{bad}");
+        }
+    }
+
+    #[test]
+    fn state_changes_need_their_own_origin_and_the_password() {
+        let access = Access {
+            password: Some("stage left".into()),
+            hosts: Vec::new(),
+        };
+        let headers = |pairs: &[(&'static str, &str)]| {
+            let mut h = HeaderMap::new();
+            for (k, v) in pairs {
+                h.insert(*k, HeaderValue::from_str(v).unwrap());
+            }
+            h
+        };
+        let auth = format!(
+            "Basic {}",
+            base64::engine::general_purpose::STANDARD.encode("any:stage left")
+        );
+        let good = [("host", "127.0.0.1:8080"), ("authorization", auth.as_str())];
+        assert!(admit(&access, &Method::POST, &headers(&good)).is_ok());
+        let same = [
+            good[0],
+            good[1],
+            ("origin", "http://127.0.0.1:8080"),
+            ("sec-fetch-site", "same-origin"),
+        ];
+        assert!(admit(&access, &Method::POST, &headers(&same)).is_ok());
+        let evil = [good[0], good[1], ("origin", "http://evil.example")];
+        assert_eq!(
+            admit(&access, &Method::POST, &headers(&evil))
+                .unwrap_err()
+                .0,
+            StatusCode::FORBIDDEN
+        );
+        // A GET is not a change: another origin may load a picture.
+        assert!(admit(&access, &Method::GET, &headers(&evil)).is_ok());
+        let cross = [good[0], good[1], ("sec-fetch-site", "cross-site")];
+        assert!(admit(&access, &Method::PUT, &headers(&cross)).is_err());
+        let wrong = format!(
+            "Basic {}",
+            base64::engine::general_purpose::STANDARD.encode("any:stage right")
+        );
+        for auth in ["", "Basic", "Basic !!", wrong.as_str()] {
+            let h = headers(&[good[0], ("authorization", auth)]);
+            assert_eq!(
+                admit(&access, &Method::GET, &h).unwrap_err().0,
+                StatusCode::UNAUTHORIZED,
+                "{auth}"
+            );
+        }
+        let rebound = [("host", "evil.example:8080"), good[1]];
+        assert_eq!(
+            admit(&access, &Method::GET, &headers(&rebound))
+                .unwrap_err()
+                .0,
+            StatusCode::FORBIDDEN
+        );
     }
 }

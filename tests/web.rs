@@ -1,6 +1,8 @@
-//! The web gallery end to end: over plain HTTP (pictures, state, picks, limits, the
-//! allow-list), and in headless Chromium driven through the DevTools protocol: load the
-//! page, generate over OSC, see the thumbnails appear, tap one, see it on the wire.
+//! The web page end to end: over plain HTTP (pictures, state, commands, limits, the
+//! allow-list, the password, cross-origin and hostile uploads), and in headless Chromium
+//! driven through the DevTools protocol: a whole designer's session (upload and add
+//! references, draw a region, generate, members, transfer, pick, undo, save, recall), each
+//! step checked on the page, in a screenshot, and on the wire.
 
 mod common;
 
@@ -96,19 +98,48 @@ fn exchange(mut s: TcpStream, request: &[u8]) -> Response {
 }
 
 fn request(addr: SocketAddr, method: &str, path: &str) -> Response {
-    match TcpStream::connect(addr) {
-        Ok(s) => exchange(
-            s,
-            // DevTools answers only a Host that is an address.
-            format!("{method} {path} HTTP/1.1\r\nHost: {addr}\r\nContent-Length: 0\r\n\r\n")
-                .as_bytes(),
-        ),
-        Err(_) => Response {
+    send(addr, method, path, &[], b"")
+}
+
+/// A request with extra header lines (`Name: value`) and a body; Host is the address
+/// (DevTools answers only a Host that is an address) unless a header sets it.
+fn send(addr: SocketAddr, method: &str, path: &str, headers: &[&str], body: &[u8]) -> Response {
+    let Ok(s) = TcpStream::connect(addr) else {
+        return Response {
             status: 0,
             kind: String::new(),
             body: Vec::new(),
-        },
+        };
+    };
+    let mut head = format!("{method} {path} HTTP/1.1\r\n");
+    if !headers
+        .iter()
+        .any(|h| h.to_ascii_lowercase().starts_with("host:"))
+    {
+        head.push_str(&format!("Host: {addr}\r\n"));
     }
+    for h in headers {
+        head.push_str(h);
+        head.push_str("\r\n");
+    }
+    if !headers
+        .iter()
+        .any(|h| h.to_ascii_lowercase().starts_with("content-length:"))
+    {
+        head.push_str(&format!("Content-Length: {}\r\n", body.len()));
+    }
+    head.push_str("Connection: close\r\n\r\n");
+    let mut raw = head.into_bytes();
+    raw.extend_from_slice(body);
+    exchange(s, &raw)
+}
+
+/// `POST /osc` with a JSON command, as the page sends it.
+fn osc(addr: SocketAddr, address: &str, args: serde_json::Value, headers: &[&str]) -> Response {
+    let mut all = vec!["Content-Type: application/json"];
+    all.extend_from_slice(headers);
+    let body = serde_json::json!({ "address": address, "args": args }).to_string();
+    send(addr, "POST", "/osc", &all, body.as_bytes())
 }
 
 fn get(addr: SocketAddr, path: &str) -> Response {
@@ -181,9 +212,12 @@ fn the_gallery_over_http() {
     let dark = jpeg(&get(addr, "/live.jpg"));
 
     // A tap picks through the OSC command path: reply, status, DMX.
-    let r = request(addr, "POST", "/pick/2");
+    let r = osc(addr, "/vo/pick", serde_json::json!([2]), &[]);
     assert_eq!(r.status, 200, "{}", String::from_utf8_lossy(&r.body));
-    assert_eq!(r.json()["reply"], "/vo/picked 2 1");
+    assert_eq!(
+        r.json()["replies"],
+        serde_json::json!([{ "address": "/vo/picked", "args": [2, 1] }])
+    );
     assert_eq!(d.status().entry, 2);
     let look = d.candidate(2, 1);
     d.wire.wait_look(Proto::Sacn, &look);
@@ -194,7 +228,7 @@ fn the_gallery_over_http() {
     );
     assert_eq!(get(addr, "/state.json").json()["entry"], 2);
     // A refused pick changes nothing and says why.
-    let r = request(addr, "POST", &format!("/pick/{}", n + 1));
+    let r = osc(addr, "/vo/pick", serde_json::json!([n + 1]), &[]);
     assert_eq!(r.status, 409);
     assert!(
         r.json()["error"]
@@ -203,19 +237,55 @@ fn the_gallery_over_http() {
     );
     assert_eq!(d.status().entry, 2);
 
+    // Members on demand, and the other pictures.
+    jpeg(&get(addr, &format!("/thumb/{serial}/2/1.jpg")));
+    assert_eq!(get(addr, &format!("/thumb/{serial}/2/999.jpg")).status, 404);
+    jpeg(&get(addr, "/selected/1.jpg"));
+    jpeg(&get(addr, "/history/u1.jpg"));
+    assert_eq!(get(addr, "/history/u99.jpg").status, 404);
+    jpeg(&get(addr, "/references/grey.png"));
+    let refs = get(addr, "/references.json").json();
+    let mut on_disk: Vec<String> = std::fs::read_dir(d.refs())
+        .expect("refs")
+        .filter_map(|e| e.ok()?.file_name().into_string().ok())
+        .filter(|n| n.ends_with(".png") || n.ends_with(".jpg"))
+        .collect();
+    on_disk.sort();
+    assert!(on_disk.len() >= 3, "{on_disk:?}");
+    assert_eq!(refs["references"], serde_json::json!(on_disk));
+
     // Bounded and strict.
     let s = TcpStream::connect(addr).expect("connect");
-    let huge = format!("GET / HTTP/1.1\r\nX-Pad: {}\r\n\r\n", "a".repeat(9000));
+    let huge = format!("GET / HTTP/1.1\r\nX-Pad: {}\r\n\r\n", "a".repeat(20000));
     assert_eq!(exchange(s, huge.as_bytes()).status, 431);
-    let s = TcpStream::connect(addr).expect("connect");
-    assert_eq!(
-        exchange(s, b"POST /pick/1 HTTP/1.1\r\nContent-Length: 5000\r\n\r\n").status,
-        413
+    let big = format!(
+        "{{\"address\":\"/vo/ping\",\"args\":[\"{}\"]}}",
+        "a".repeat(5000)
     );
+    let r = send(
+        addr,
+        "POST",
+        "/osc",
+        &["Content-Type: application/json"],
+        big.as_bytes(),
+    );
+    assert_eq!(r.status, 413);
     let s = TcpStream::connect(addr).expect("connect");
     assert_eq!(exchange(s, b"hello there\r\n\r\n").status, 400);
-    assert_eq!(request(addr, "PUT", "/pick/1").status, 405);
+    assert_eq!(request(addr, "PUT", "/osc").status, 405);
     assert_eq!(request(addr, "GET", "/nothing").status, 404);
+    let r = send(
+        addr,
+        "POST",
+        "/osc",
+        &["Content-Type: application/json"],
+        b"{not json",
+    );
+    assert_eq!(r.status, 400, "{}", String::from_utf8_lossy(&r.body));
+    let r = osc(addr, "/vo/backup/subscribe", serde_json::json!([]), &[]);
+    assert_eq!(r.status, 403);
+    let r = osc(addr, "/vo/pick", serde_json::json!([[1]]), &[]);
+    assert_eq!(r.status, 400);
     assert_eq!(d.status().entry, 2);
 }
 
@@ -296,15 +366,11 @@ struct Page {
 }
 
 impl Page {
-    /// Evaluates `expression` in the page; its value as JSON.
-    fn eval(&mut self, expression: &str) -> serde_json::Value {
+    /// Calls a DevTools method; its result.
+    fn call(&mut self, method: &str, params: serde_json::Value) -> serde_json::Value {
         self.next_id += 1;
         let id = self.next_id;
-        let call = serde_json::json!({
-            "id": id,
-            "method": "Runtime.evaluate",
-            "params": { "expression": expression, "returnByValue": true },
-        });
+        let call = serde_json::json!({ "id": id, "method": method, "params": params });
         self.ws
             .send(tungstenite::Message::text(call.to_string()))
             .expect("send to DevTools");
@@ -313,13 +379,63 @@ impl Page {
             let Ok(text) = m.to_text() else { continue };
             let v: serde_json::Value = serde_json::from_str(text).expect("DevTools JSON");
             if v["id"] == id {
-                assert!(
-                    v["result"]["exceptionDetails"].is_null(),
-                    "{expression}: {v}"
-                );
-                return v["result"]["result"]["value"].clone();
+                assert!(v["error"].is_null(), "{method}: {v}");
+                return v["result"].clone();
             }
         }
+    }
+
+    /// Evaluates `expression` in the page; its value as JSON.
+    fn eval(&mut self, expression: &str) -> serde_json::Value {
+        let r = self.call(
+            "Runtime.evaluate",
+            serde_json::json!({ "expression": expression, "returnByValue": true, "awaitPromise": true }),
+        );
+        assert!(r["exceptionDetails"].is_null(), "{expression}: {r}");
+        r["result"]["value"].clone()
+    }
+
+    /// Clicks the element `selector` names (it must exist).
+    fn click(&mut self, selector: &str) {
+        let js = format!(
+            "(() => {{ const e = document.querySelector({selector:?}); if (!e) return false; e.click(); return true; }})()"
+        );
+        assert_eq!(self.eval(&js), true, "no {selector} on the page");
+    }
+
+    /// Saves a screenshot of the page as `name`.png under the test's target folder.
+    fn screenshot(&mut self, name: &str) -> PathBuf {
+        use base64::Engine as _;
+        let r = self.call(
+            "Page.captureScreenshot",
+            serde_json::json!({ "format": "png", "captureBeyondViewport": true }),
+        );
+        let png = base64::engine::general_purpose::STANDARD
+            .decode(r["data"].as_str().expect("screenshot data"))
+            .expect("base64");
+        let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("web-session");
+        std::fs::create_dir_all(&dir).expect("screenshot folder");
+        let path = dir.join(format!("{name}.png"));
+        std::fs::write(&path, png).expect("write screenshot");
+        path
+    }
+
+    /// A real mouse drag (DevTools input, as a hand would): from and to in page pixels.
+    fn drag(&mut self, from: (f64, f64), to: (f64, f64)) {
+        let mouse = |page: &mut Page, kind: &str, (x, y): (f64, f64), buttons: u8| {
+            page.call(
+                "Input.dispatchMouseEvent",
+                serde_json::json!({ "type": kind, "x": x, "y": y, "button": "left", "buttons": buttons, "clickCount": 1 }),
+            );
+        };
+        mouse(self, "mouseMoved", from, 0);
+        mouse(self, "mousePressed", from, 1);
+        for i in 1..=8 {
+            let f = f64::from(i) / 8.0;
+            let p = (from.0 + (to.0 - from.0) * f, from.1 + (to.1 - from.1) * f);
+            mouse(self, "mouseMoved", p, 1);
+        }
+        mouse(self, "mouseReleased", to, 0);
     }
 
     /// Polls `expression` until `want` holds (bounded); returns the last value.
@@ -355,6 +471,7 @@ fn open(browser: &Path, url: &str, name: &str) -> (Browser, Page) {
             "--disable-component-update",
             "--disable-sync",
             "--remote-debugging-port=0",
+            "--window-size=1500,1100",
         ])
         .arg(format!("--user-data-dir={}", profile.display()))
         .arg(url)
@@ -457,5 +574,427 @@ fn a_tap_in_the_browser_puts_the_entry_live() {
         "[...document.querySelectorAll('#objectives img')].filter(i => i.complete && i.naturalWidth > 0).length",
         "showed the reference image",
         |v| v == 1,
+    );
+}
+
+/// An 8x8 PNG of one colour, as bytes.
+fn png(rgb: [u8; 3]) -> Vec<u8> {
+    let img = image::RgbImage::from_pixel(8, 8, image::Rgb(rgb));
+    let mut out = std::io::Cursor::new(Vec::new());
+    img.write_to(&mut out, image::ImageFormat::Png)
+        .expect("encode");
+    out.into_inner()
+}
+
+#[test]
+fn hostile_requests_change_nothing() {
+    let (mut d, addr) = start("web-hostile");
+    d.add_objective("warm.png", "both");
+    d.generate();
+    d.ok("/vo/pick", vec![int(1)], "/vo/picked");
+    let live = d.live();
+    d.wire.wait_look(Proto::Sacn, &live);
+    let listed = || get(addr, "/references.json").json()["references"].clone();
+    let before = listed();
+
+    // Uploads: too big (refused before the body is read), not an image, the wrong type
+    // for its name, names with paths in them.
+    let r = send(
+        addr,
+        "PUT",
+        "/references/huge.png",
+        &["Content-Length: 40000000"],
+        b"",
+    );
+    assert_eq!(
+        r.status,
+        413,
+        "{}\n{}",
+        String::from_utf8_lossy(&r.body),
+        d.log_text()
+    );
+    for (name, body, status) in [
+        ("fake.jpg", b"this is not a jpeg at all".to_vec(), 400),
+        ("blue.jpg", png([0, 0, 255]), 400),
+        ("notes.txt", png([0, 0, 255]), 400),
+        ("..%2F..%2Fescape.png", png([0, 0, 255]), 400),
+        ("sub%2Fx.png", png([0, 0, 255]), 400),
+        (".hidden.png", png([0, 0, 255]), 400),
+        ("warm.png", png([0, 0, 255]), 409),
+    ] {
+        let r = send(addr, "PUT", &format!("/references/{name}"), &[], &body);
+        assert_eq!(
+            r.status,
+            status,
+            "{name}: {}",
+            String::from_utf8_lossy(&r.body)
+        );
+        let e = r.json()["error"].as_str().unwrap_or_default().to_string();
+        assert!(
+            e.starts_with("upload `"),
+            "{name}: a sentence naming it: {e}"
+        );
+    }
+    assert_eq!(listed(), before, "no file was stored");
+    assert!(!d.refs().join("../escape.png").exists());
+    assert_eq!(get(addr, "/references/..%2Fvisobjd.toml").status, 404);
+
+    // Another site's page, a rebound name, a GET that would change something.
+    let evil = osc(
+        addr,
+        "/vo/pick",
+        serde_json::json!([2]),
+        &["Origin: http://evil.example"],
+    );
+    assert_eq!(evil.status, 403, "{}", String::from_utf8_lossy(&evil.body));
+    let site = osc(
+        addr,
+        "/vo/pick",
+        serde_json::json!([2]),
+        &["Sec-Fetch-Site: cross-site"],
+    );
+    assert_eq!(site.status, 403);
+    let rebound = osc(
+        addr,
+        "/vo/pick",
+        serde_json::json!([2]),
+        &["Host: evil.example:8080"],
+    );
+    assert_eq!(rebound.status, 403);
+    assert_eq!(get(addr, "/osc").status, 405);
+    let r = send(
+        addr,
+        "PUT",
+        "/references/new.png",
+        &["Origin: http://evil.example"],
+        &png([0, 255, 0]),
+    );
+    assert_eq!(r.status, 403);
+    assert_eq!(listed(), before);
+    assert_eq!(d.status().entry, 1);
+    assert_eq!(d.live(), live);
+    d.wire.wait_look(Proto::Sacn, &live);
+
+    // A good upload goes through (and shows in the list).
+    let r = send(addr, "PUT", "/references/new.png", &[], &png([0, 255, 0]));
+    assert_eq!(r.status, 201, "{}", String::from_utf8_lossy(&r.body));
+    assert!(d.refs().join("new.png").is_file());
+}
+
+#[test]
+fn the_password_is_asked_for() {
+    let lo = IpAddr::from([127, 0, 0, 1]);
+    let port = free_port(lo, lo);
+    let mut d = Daemon::start_with(
+        "web-password",
+        &format!("\n[http]\nlisten = \"127.0.0.1:{port}\"\npassword = \"stage left\"\n"),
+    );
+    let addr = SocketAddr::from(([127, 0, 0, 1], port));
+    use base64::Engine as _;
+    let b64 = |s: &str| base64::engine::general_purpose::STANDARD.encode(s);
+    let good = format!("Authorization: Basic {}", b64("designer:stage left"));
+    let end = Instant::now() + PATIENCE;
+    while send(addr, "GET", "/state.json", &[&good], b"").status != 200 {
+        assert!(Instant::now() < end, "the web page never answered");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    d.add_objective("warm.png", "both");
+    d.generate();
+    let live = d.live();
+    let r = get(addr, "/");
+    assert_eq!(r.status, 401);
+    let wrong = format!("Authorization: Basic {}", b64("designer:stage right"));
+    for auth in [&[][..], &[wrong.as_str()][..]] {
+        let r = osc(addr, "/vo/pick", serde_json::json!([1]), auth);
+        assert_eq!(r.status, 401);
+        assert!(
+            r.json()["error"]
+                .as_str()
+                .is_some_and(|e| e.contains("password"))
+        );
+    }
+    assert_eq!(d.status().entry, 0);
+    assert_eq!(d.live(), live);
+    let r = osc(addr, "/vo/pick", serde_json::json!([1]), &[&good]);
+    assert_eq!(r.status, 200, "{}", String::from_utf8_lossy(&r.body));
+    assert_eq!(d.status().entry, 1);
+}
+
+/// The look the page shows (its last state: every light's intensity and colour), as the
+/// wire decoder compares it; a light without colour reads `1 1 1` as on OSC.
+fn page_look(page: &mut Page) -> Vec<common::daemon::Light> {
+    let v = page.eval(
+        "JSON.stringify(st ? st.lights.map(l => [l.ch, l.intensity, l.colour ? l.color : [1, 1, 1]]) : [])",
+    );
+    let rows: Vec<(i32, f32, [f32; 3])> =
+        serde_json::from_str(v.as_str().expect("text")).expect("lights");
+    rows.into_iter()
+        .map(|(ch, intensity, color)| common::daemon::Light {
+            ch,
+            intensity,
+            color,
+        })
+        .collect()
+}
+
+/// Waits until the page shows `want` (within float noise), then checks both protocols on
+/// the wire carry what the page shows.
+fn shows_on_page_and_wire(page: &mut Page, d: &Daemon, want: &[common::daemon::Light], step: &str) {
+    let end = Instant::now() + Duration::from_secs(30);
+    loop {
+        let shown = page_look(page);
+        let same = shown.len() == want.len()
+            && shown.iter().zip(want).all(|(a, b)| {
+                a.ch == b.ch
+                    && (a.intensity - b.intensity).abs() < 1e-5
+                    && a.color
+                        .iter()
+                        .zip(&b.color)
+                        .all(|(x, y)| (x - y).abs() < 1e-5)
+            });
+        if same {
+            d.wire.wait_look(Proto::Sacn, &shown);
+            d.wire.wait_look(Proto::Artnet, &shown);
+            return;
+        }
+        assert!(
+            Instant::now() < end,
+            "{step}: the page never showed {want:?}; it shows {shown:?}"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+/// Waits until every image under `selector` has loaded, and that there are `n`.
+fn images_loaded(page: &mut Page, selector: &str, n: usize, what: &str) {
+    let js = format!(
+        "[...document.querySelectorAll({selector:?})].filter(i => i.complete && i.naturalWidth > 0).length"
+    );
+    page.wait(&js, what, |v| v.as_u64() == Some(n as u64));
+}
+
+#[test]
+fn a_designer_session_in_the_browser() {
+    let Some(browser) = chromium() else {
+        return tools::missing("Chromium", "is not installed", "apt-get install chromium");
+    };
+    let (mut d, addr) = start("web-session");
+    d.ok(
+        "/vo/generate/clusters",
+        vec![int(6)],
+        "/vo/generate/clusters",
+    );
+    d.ok("/vo/fade", vec![common::daemon::float(0.0)], "/vo/fade");
+    let url = format!("http://{addr}/");
+    let (_browser, mut page) = open(&browser, &url, "session");
+    page.wait(
+        "document.getElementById('status')?.textContent ?? ''",
+        "showed the daemon's status",
+        |v| v.as_str().is_some_and(|s| s.contains("no gallery yet")),
+    );
+
+    // 1. Upload a new reference through the file picker, as a designer would.
+    let upload = temp_dir("web-session-upload").join("deep blue.png");
+    std::fs::write(&upload, png([10, 30, 200])).expect("write the upload");
+    let doc = page.call("DOM.getDocument", serde_json::json!({}));
+    let input = page.call(
+        "DOM.querySelector",
+        serde_json::json!({ "nodeId": doc["root"]["nodeId"], "selector": "#upload" }),
+    );
+    page.call(
+        "DOM.setFileInputFiles",
+        serde_json::json!({ "nodeId": input["nodeId"], "files": [upload.display().to_string()] }),
+    );
+    page.wait(
+        "[...document.querySelectorAll('#references .ref')].map(b => b.dataset.name).join(',')",
+        "listed the uploaded reference",
+        |v| {
+            v.as_str()
+                .is_some_and(|s| s.split(',').any(|n| n == "deep blue.png"))
+        },
+    );
+    assert_eq!(
+        std::fs::read(d.refs().join("deep blue.png")).expect("stored"),
+        std::fs::read(&upload).expect("upload")
+    );
+
+    // 2. Add two references as objectives: one for both aspects, the new one for colour.
+    page.click("#references .ref[data-name='warm.png']");
+    page.wait(
+        "document.querySelectorAll('#objectives .objective').length",
+        "added warm.png",
+        |v| v == 1,
+    );
+    page.eval("document.getElementById('aspect').value = 'color'; true");
+    page.click("#references .ref[data-name='deep blue.png']");
+    page.wait(
+        "document.querySelectorAll('#objectives .objective').length",
+        "added deep blue.png",
+        |v| v == 2,
+    );
+    assert_eq!(d.status().objectives, 2);
+    let listing = d.call("/vo/objectives", vec![], "/vo/objectives/end");
+    assert_eq!(common::daemon::text(&listing[1].args[1]), "deep blue.png");
+    assert_eq!(common::daemon::text(&listing[1].args[2]), "color");
+    images_loaded(
+        &mut page,
+        "#objectives img",
+        2,
+        "showed both reference images",
+    );
+    page.screenshot("1-references");
+
+    // 3. Draw objective 1's region on the stage with the mouse.
+    page.click("#objectives .objective[data-id='1']");
+    page.wait("chosen", "selected objective 1", |v| v == 1);
+    let rect = page.eval(
+        "(() => { const b = document.getElementById('stage').getBoundingClientRect(); return [b.left, b.top, b.width, b.height]; })()",
+    );
+    let r: Vec<f64> = serde_json::from_value(rect).expect("rect");
+    let at = |fx: f64, fy: f64| (r[0] + r[2] * fx, r[1] + r[3] * fy);
+    page.drag(at(0.1, 0.2), at(0.5, 0.9));
+    // The drag explored: once it ends, a gallery drawn from the region is on the page
+    // without a generate.
+    page.wait("exploring", "ended the drag's explore", |v| v == false);
+    page.wait(
+        "st.gallery ? st.gallery.sizes.length : 0",
+        "showed a gallery explored by the drag",
+        |v| v.as_u64().is_some_and(|n| n > 0),
+    );
+    let region = page.wait("st.objectives[0].region", "took the drawn region", |v| {
+        v[2].as_f64().is_some_and(|x1| (x1 - 0.5).abs() < 0.02)
+    });
+    let listing = d.call("/vo/objectives", vec![], "/vo/objectives/end");
+    for (i, want) in [0.1, 0.2, 0.5, 0.9].iter().enumerate() {
+        let daemon = match listing[0].args[3 + i] {
+            rosc::OscType::Float(f) => f64::from(f),
+            ref other => panic!("a float, got {other:?}"),
+        };
+        assert!(
+            (daemon - want).abs() < 0.02,
+            "x0 y0 x1 y1 {i}: {daemon} vs {want}"
+        );
+        assert!((region[i].as_f64().expect("num") - daemon).abs() < 1e-6);
+    }
+    page.eval("document.getElementById('showsel').click(); true");
+    page.wait(
+        "document.getElementById('stageimg').getAttribute('src')",
+        "showed the lights the region selects",
+        |v| v.as_str().is_some_and(|s| s.starts_with("/selected/1.jpg")),
+    );
+    images_loaded(&mut page, "#stageimg", 1, "drew the selected lights");
+    let chosen = page.eval("st.objectives[0].selected.length");
+    assert!(
+        chosen.as_u64().is_some_and(|n| n > 0),
+        "the region selects lights"
+    );
+    page.screenshot("2-region");
+    page.eval("document.getElementById('showsel').click(); true");
+
+    // 4. Generate from the page; the gallery arrives by the event stream.
+    page.click("#generate");
+    let n = page.wait(
+        "st.gallery ? st.gallery.sizes.length : 0",
+        "showed a gallery",
+        |v| v.as_u64().is_some_and(|n| n > 1),
+    );
+    let n = n.as_u64().expect("n") as usize;
+    assert_eq!(d.gallery().len(), n);
+    images_loaded(
+        &mut page,
+        "#gallery .entry > .thumb img",
+        n,
+        "showed every entry",
+    );
+    page.screenshot("3-gallery");
+
+    // 5. Open entry 2's members.
+    page.click("#gallery .entry[data-k='2'] .members");
+    let size = d.gallery()[1] as usize;
+    images_loaded(
+        &mut page,
+        "#gallery .entry[data-k='2'] .member img",
+        size,
+        "showed entry 2's members",
+    );
+    page.screenshot("4-members");
+
+    // 6. Transfer a group from entry 3 onto the (dark) stage.
+    let group = page
+        .eval("st.groups[0].name")
+        .as_str()
+        .expect("a group")
+        .to_string();
+    let members: Vec<i32> = page
+        .eval("st.groups[0].lights")
+        .as_array()
+        .expect("lights")
+        .iter()
+        .map(|v| v.as_i64().expect("ch") as i32)
+        .collect();
+    page.eval(&format!(
+        "document.getElementById('transfergroup').value = {group:?}; true"
+    ));
+    let before = d.live();
+    let third = d.candidate(3, 1);
+    page.click("#gallery .entry[data-k='3'] .transfer");
+    let transferred: Vec<common::daemon::Light> = before
+        .iter()
+        .zip(&third)
+        .map(|(b, c)| {
+            if members.contains(&b.ch) {
+                c.clone()
+            } else {
+                b.clone()
+            }
+        })
+        .collect();
+    shows_on_page_and_wire(&mut page, &d, &transferred, "transfer");
+    assert_eq!(d.live(), transferred);
+    page.screenshot("5-transfer");
+
+    // 7. Pick another entry.
+    let fourth = d.candidate(4, 1);
+    page.click("#gallery .entry[data-k='4'] .thumb");
+    shows_on_page_and_wire(&mut page, &d, &fourth, "pick 4");
+    page.wait(
+        "document.querySelector('#gallery .thumb.live')?.parentElement.dataset.k ?? ''",
+        "marked entry 4 live",
+        |v| v == "4",
+    );
+    assert_eq!(d.status().entry, 4);
+
+    // 8. Undo: back to the transferred look; the history shows thumbnails.
+    page.click("#undo");
+    shows_on_page_and_wire(&mut page, &d, &transferred, "undo");
+    images_loaded(&mut page, "#history .redo img", 1, "showed the redo step");
+    page.wait(
+        "document.querySelectorAll('#history .undo img').length",
+        "showed the undo steps",
+        |v| v.as_u64().is_some_and(|n| n >= 1),
+    );
+    page.screenshot("6-undo");
+
+    // 9. Save it as look 1 "Act 1", then go elsewhere and recall it.
+    page.eval("document.getElementById('looknum').value = '1'; document.getElementById('looklabel').value = 'Act 1'; true");
+    page.click("#save");
+    images_loaded(&mut page, "#looks .look img", 1, "showed the saved look");
+    let looks = d.call("/vo/looks", vec![], "/vo/looks/end");
+    assert_eq!(common::daemon::text(&looks[0].args[1]), "Act 1");
+    page.click("#gallery .entry[data-k='1'] .thumb");
+    let first = d.candidate(1, 1);
+    shows_on_page_and_wire(&mut page, &d, &first, "pick 1");
+    page.click("#looks .look[data-n='1']");
+    shows_on_page_and_wire(&mut page, &d, &transferred, "recall look 1");
+    assert_eq!(d.live(), transferred);
+    page.wait(
+        "document.getElementById('status')?.textContent ?? ''",
+        "showed the status line with the output's health",
+        |v| v.as_str().is_some_and(|s| s.contains("fps")),
+    );
+    page.screenshot("7-recalled");
+    assert_eq!(
+        page.eval("document.getElementById('error').textContent"),
+        ""
     );
 }

@@ -132,10 +132,17 @@ async fn serve(config: &Config, engine: &Arc<Engine>) -> anyhow::Result<()> {
     let http = if config.http.listen.is_empty() {
         None
     } else {
-        let http =
-            crate::http::Http::start(&config.http.listen, config.allow_list(), Arc::clone(engine))
-                .await
-                .map_err(anyhow::Error::msg)?;
+        let http = crate::http::Http::start(
+            &config.http.listen,
+            config.allow_list(),
+            crate::http::Access {
+                password: (!config.http.password.is_empty()).then(|| config.http.password.clone()),
+                hosts: config.http.hosts.clone(),
+            },
+            Arc::clone(engine),
+        )
+        .await
+        .map_err(anyhow::Error::msg)?;
         tracing::info!("web gallery on http://{}/", http.addr());
         Some(http)
     };

@@ -25,6 +25,7 @@ pub enum Edit {
     Region { id: Which, region: Region },
     Palette { id: Which },
     Color { id: Which, k: usize, rgb: [f32; 3] },
+    Weight { id: Which, k: usize, w: f32 },
     Remove { id: Which },
     Clear,
     List,
@@ -101,6 +102,11 @@ impl Cmd {
                 k: int_arg(req, 0, "palette colour number", 1, 64)? as usize,
                 rgb: rgb_args(req, 1)?,
             },
+            "weight" => Edit::Weight {
+                id: id(seg)?,
+                k: int_arg(req, 0, "palette colour number", 1, 64)? as usize,
+                w: num_arg(req, 1, "weight", 0.0, 1.0)?,
+            },
             "remove" => Edit::Remove { id: id(seg)? },
             _ => return Ok(None),
         })))
@@ -159,6 +165,18 @@ impl Cmd {
                         format!("objective {id} has no palette colour {k} (colours 1-{n})")
                     })?;
                     c.color = rgb;
+                    Outcome::reply(palette(id, &s.objectives[i].objective)).saved()
+                }
+                Edit::Weight { id, k, w } => {
+                    let (i, id) = find(s, id)?;
+                    let colors = &mut s.objectives[i].objective.analysis.palette;
+                    let n = colors.len();
+                    if k > n {
+                        return Err(format!(
+                            "objective {id} has no palette colour {k} (colours 1-{n})"
+                        ));
+                    }
+                    reweigh(colors, k - 1, w)?;
                     Outcome::reply(palette(id, &s.objectives[i].objective)).saved()
                 }
                 Edit::Remove { id } => {
@@ -271,4 +289,67 @@ fn palette(id: u32, o: &Objective) -> OscMessage {
         a.push(OscType::Float(p.weight));
     }
     msg("/vo/objective/palette", a)
+}
+
+/// Gives palette colour `k` the weight `w` and the others `1 - w` in their old proportions
+/// (equal shares if they had none), so the weights still sum to 1; the order is kept.
+fn reweigh(
+    colors: &mut [visobjd_method::objective::PaletteColor],
+    k: usize,
+    w: f32,
+) -> Result<(), String> {
+    let others = colors.len() - 1;
+    if others == 0 && w < 1.0 {
+        return Err("a palette of one colour has weight 1".into());
+    }
+    let rest: f32 = colors
+        .iter()
+        .enumerate()
+        .filter(|(j, _)| *j != k)
+        .map(|(_, c)| c.weight)
+        .sum();
+    for (j, c) in colors.iter_mut().enumerate() {
+        c.weight = if j == k {
+            w
+        } else if rest > 0.0 {
+            c.weight / rest * (1.0 - w)
+        } else {
+            (1.0 - w) / others as f32
+        };
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use visobjd_method::objective::PaletteColor;
+
+    fn palette(weights: &[f32]) -> Vec<PaletteColor> {
+        weights
+            .iter()
+            .map(|&weight| PaletteColor {
+                color: [0.5; 3],
+                weight,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_new_weight_keeps_the_sum_and_the_others_proportions() {
+        let mut p = palette(&[0.5, 0.3, 0.2]);
+        reweigh(&mut p, 2, 0.6).unwrap();
+        let w: Vec<f32> = p.iter().map(|c| c.weight).collect();
+        assert!((w[2] - 0.6).abs() < 1e-6);
+        assert!(
+            (w[0] - 0.25).abs() < 1e-6 && (w[1] - 0.15).abs() < 1e-6,
+            "{w:?}"
+        );
+        let mut p = palette(&[1.0, 0.0, 0.0]);
+        reweigh(&mut p, 0, 0.5).unwrap();
+        assert_eq!(p[1].weight, 0.25);
+        let mut one = palette(&[1.0]);
+        assert!(reweigh(&mut one, 0, 0.5).is_err());
+        reweigh(&mut one, 0, 1.0).unwrap();
+    }
 }

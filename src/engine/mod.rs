@@ -44,6 +44,12 @@ use visobjd_scene::look::LookFile;
 /// How long a subscription lasts without a message from its subscriber (docs/osc.md).
 const SUBSCRIPTION: Duration = Duration::from_secs(600);
 
+/// Change batches kept for a slow web page before it is told it fell behind.
+const CHANGES_KEPT: usize = 256;
+
+/// Largest name of an uploaded reference image.
+const MAX_REFERENCE_NAME: usize = 100;
+
 /// A client that asked for state changes.
 #[derive(Debug, Clone)]
 struct Subscriber {
@@ -87,6 +93,9 @@ pub struct Engine {
     threads: Threads,
     subscribers: Mutex<Vec<Subscriber>>,
     push: OnceLock<Sender>,
+    /// Every batch pushed to subscribers, for the web page's event stream (src/http.rs);
+    /// an empty batch is a change tablets are not told of (a saved look).
+    changes: tokio::sync::broadcast::Sender<Arc<[OscMessage]>>,
     eos: crate::eos::EosConfig,
     /// `VISOBJD_TEST_HOOKS` was set: `/vo/test/...` may inject faults.
     test_hooks: bool,
@@ -140,6 +149,7 @@ impl Engine {
             threads: Threads::default(),
             subscribers: Mutex::new(Vec::new()),
             push: OnceLock::new(),
+            changes: tokio::sync::broadcast::channel(CHANGES_KEPT).0,
             eos: config.eos.clone(),
             test_hooks: std::env::var_os(TEST_HOOKS).is_some(),
             panic_generate: AtomicBool::new(false),
@@ -235,6 +245,8 @@ impl Engine {
         let mut s = self.session();
         s.looks = looks;
         self.forward_pending();
+        drop(s);
+        self.notify(&[]);
         Ok(out)
     }
 
@@ -449,6 +461,74 @@ impl Engine {
     /// The references folder (objective images are read from it, and only from it).
     pub fn references(&self) -> &Path {
         &self.references
+    }
+
+    /// The image files (PNG, JPEG by their extension) in the references folder, sorted.
+    pub fn reference_names(&self) -> Result<Vec<String>, String> {
+        let dir = std::fs::read_dir(&self.references).map_err(|e| {
+            format!(
+                "the references folder {} is not readable: {e}",
+                self.references.display()
+            )
+        })?;
+        let mut names: Vec<String> = dir
+            .filter_map(|e| e.ok()?.file_name().into_string().ok())
+            .filter(|n| reference_format(n).is_some() && !n.starts_with('.'))
+            .collect();
+        names.sort();
+        Ok(names)
+    }
+
+    /// Stores an uploaded reference image as `name` in the references folder, atomically,
+    /// after the checks every reference passes (a plain file name with a PNG or JPEG
+    /// extension, content of that type, within the size limit, decodable). Never replaces a
+    /// file. The error says why, with `true` when the name is taken.
+    pub fn store_reference(&self, name: &str, bytes: &[u8]) -> Result<String, (bool, String)> {
+        let refused = |why: String| (false, format!("upload `{name}`: {why}"));
+        let plain = !name.is_empty()
+            && name.len() <= MAX_REFERENCE_NAME
+            && !name.starts_with('.')
+            && name
+                .bytes()
+                .all(|b| b.is_ascii_alphanumeric() || b"._- ".contains(&b));
+        if !plain {
+            return Err(refused(format!(
+                "a reference's name is a plain file name of at most {MAX_REFERENCE_NAME} letters, digits, spaces, '.', '_' or '-' (no folders), not starting with '.'"
+            )));
+        }
+        let Some(format) = reference_format(name) else {
+            return Err(refused("a reference is a .png, .jpg or .jpeg file".into()));
+        };
+        if image::guess_format(bytes).ok() != Some(format) {
+            return Err(refused(format!(
+                "the content is not a {} image",
+                format
+                    .extensions_str()
+                    .first()
+                    .copied()
+                    .unwrap_or("")
+                    .to_uppercase()
+            )));
+        }
+        {
+            let _one_at_a_time = self.reading.lock().unwrap_or_else(|p| p.into_inner());
+            visobjd_method::objective::decode_reference_bytes(bytes).map_err(&refused)?;
+        }
+        let path = self.references.join(name);
+        if path.exists() {
+            return Err((
+                true,
+                format!("upload `{name}`: a reference of that name exists; choose another name"),
+            ));
+        }
+        visobjd_files::write_atomic(&path, bytes).map_err(|e| {
+            refused(format!(
+                "cannot write it in the references folder {}: {e}",
+                self.references.display()
+            ))
+        })?;
+        tracing::info!("reference {name} stored ({} bytes)", bytes.len());
+        Ok(name.to_string())
     }
 
     /// Reads and analyses a reference image from the references folder for a new
@@ -754,8 +834,17 @@ impl Engine {
         msgs.iter().try_for_each(|m| push.send(to, m))
     }
 
-    /// Pushes messages to every live subscriber; expired or unreachable ones are dropped.
+    /// Every change from now on, as the batches [`Engine::notify`] pushes (the web page's
+    /// event stream).
+    pub fn changes(&self) -> tokio::sync::broadcast::Receiver<Arc<[OscMessage]>> {
+        self.changes.subscribe()
+    }
+
+    /// Pushes messages to every live subscriber (expired or unreachable ones are dropped)
+    /// and to the web pages' event streams.
     pub fn notify(&self, msgs: &[OscMessage]) {
+        // No page listening is no error.
+        let _ = self.changes.send(msgs.into());
         let mut subs = self.subscribers.lock().unwrap_or_else(|p| p.into_inner());
         subs.retain(|s| {
             s.last_seen.elapsed() < SUBSCRIPTION
@@ -794,6 +883,16 @@ fn send_backups(backups: &mut Vec<Peer>, msgs: &[OscMessage]) {
         }
         sent
     });
+}
+
+/// The image format a reference's file name promises, by its extension.
+fn reference_format(name: &str) -> Option<image::ImageFormat> {
+    let (_, ext) = name.rsplit_once('.')?;
+    match ext.to_ascii_lowercase().as_str() {
+        "png" => Some(image::ImageFormat::Png),
+        "jpg" | "jpeg" => Some(image::ImageFormat::Jpeg),
+        _ => None,
+    }
 }
 
 /// Universes as status lists them: `1 2 5`.
