@@ -891,8 +891,13 @@ fn a_designer_session_in_the_browser() {
     page.screenshot("2-region");
     page.eval("document.getElementById('showsel').click(); true");
 
-    // 4. Generate from the page; the gallery arrives by the event stream.
+    // 4. Generate from the page; the gallery arrives by the event stream (a new one: the
+    // drag's is on the page already).
+    let explored = page.eval("st.gallery.serial");
     page.click("#generate");
+    page.wait("st.gallery.serial", "showed the generated gallery", |v| {
+        *v != explored
+    });
     let n = page.wait(
         "st.gallery ? st.gallery.sizes.length : 0",
         "showed a gallery",
