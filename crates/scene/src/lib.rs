@@ -553,7 +553,6 @@ pub fn describe_toml_error(text: &str, e: &toml::de::Error) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::emitter::colour::xyy_to_xyz;
 
     const LIGHT: &str =
         "[[light]]\nchannel = 1\nbasis = \"b.exr\"\nprofile = \"p\"\nuniverse = 1\naddress = 1\n";
@@ -643,10 +642,18 @@ mod tests {
         let text = table("{ xy = [0.6, 0.35], flux = 0.25 }");
         let measured = Scene::parse(Path::new("/s"), &text).expect("parses");
         let plain = Scene::parse(Path::new("/s"), light).expect("parses");
+        let xyz = |x, y, flux| {
+            crate::profile::Emitter {
+                name: String::new(),
+                xy: [x, y],
+                flux,
+            }
+            .xyz()
+        };
         let want = ColourModel::from_emitters(vec![
-            xyy_to_xyz(0.6, 0.35, 0.25),
-            xyy_to_xyz(0.33, 0.52, 0.6),
-            xyy_to_xyz(0.16, 0.11, 0.1),
+            xyz(0.6, 0.35, 0.25),
+            xyz(0.33, 0.52, 0.6),
+            xyz(0.16, 0.11, 0.1),
         ]);
         assert_eq!(measured.colour_model(0), want, "the measured emitters");
         assert_eq!(plain.colour_model(0), ColourModel::new(plain.profile(0)));
