@@ -127,6 +127,56 @@ fn a_stopped_capture_resumes_where_it_left_off() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// The CIEDE2000 between sRGB `target` and what light `ch` of `scene` makes of it on the
+/// sim's fixtures: the look's DMX bytes read at the light's slots (its profile's order:
+/// an optional intensity, then red, green, blue and white) mixed by the true emitters
+/// (`truth` xy and flux for red, green, blue; white as the test's `emitters.json` says),
+/// compared in chromaticity (both at Y = 0.4 under D65).
+fn sent_colour_error(
+    scene: &visobjd_scene::Scene,
+    ch: u32,
+    target: [f32; 3],
+    truth: &[[f64; 3]; 3],
+) -> f64 {
+    use visobjd_scene::emitter::colour::{ciede2000, linear_srgb_to_xyz, xyy_to_xyz, xyz_to_lab};
+    use visobjd_scene::look::{Level, Look};
+    let l = scene.light_index(ch).expect("light in scene");
+    let mut look = Look::off(scene.lights.len());
+    look.levels[l] = Level {
+        intensity: 1.0,
+        color: target,
+    };
+    let patch = visobjd_dmx::Patch::new(scene);
+    let bytes = patch.quantise(&patch.levels(&look, 1.0));
+    let light = &scene.lights[l];
+    let at = usize::from(light.address) - 1;
+    let names = scene.profile(l).channel_names();
+    let mut emitters = truth.to_vec();
+    emitters.push([0.40, 0.39, 0.8]);
+    let mut reached = [0.0; 3];
+    let dimmer = names
+        .iter()
+        .position(|n| n == "intensity")
+        .map_or(1.0, |k| f64::from(bytes[0][at + k]) / 255.0);
+    for (k, name) in names.iter().enumerate() {
+        let Some(e) = ["red", "green", "blue", "white"]
+            .iter()
+            .position(|n| n == name)
+        else {
+            continue;
+        };
+        let [x, y, flux] = emitters[e];
+        let level = dimmer * f64::from(bytes[0][at + k]) / 255.0;
+        for (r, v) in reached.iter_mut().zip(xyy_to_xyz(x, y, flux)) {
+            *r += level * v;
+        }
+    }
+    let want =
+        linear_srgb_to_xyz(target.map(|c| f64::from(visobjd_scene::srgb::srgb_to_linear(c))));
+    let lab = |xyz: [f64; 3]| xyz_to_lab(xyz.map(|v| v * 0.4 / xyz[1]));
+    ciede2000(lab(reached), lab(want))
+}
+
 /// The colour test: lights 2 (irgb), 3 (rgb) and 4 (rgbw) are really other than
 /// their profiles say (the sim's `emitters.json`: an orange red, a yellowish green, a warm
 /// white). Captured per emitter, the preview of a saturated look (the per-emitter images
@@ -176,6 +226,46 @@ fn per_emitter_preview_matches_a_shot_where_white_only_misses() {
     };
     assert!(per_emitter < 3.0, "{line}");
     assert!(white_only > 3.0 && white_only > per_emitter, "{line}");
+    // The emitters measured from the images aim the solve: a saturated colour sent to the
+    // fixtures, its DMX bytes read back here and mixed by the sim's true emitters, lands
+    // near the target; aimed with the profiles' emitters it misses.
+    let measured = visobjd_scene::Scene::load(&scene).expect("captured scene loads");
+    let mut file = visobjd_scene::SceneFile::parse(&scene.join("scene.toml"), &toml)
+        .expect("scene.toml parses");
+    assert!(
+        file.light
+            .iter()
+            .filter(|l| !l.emitter_measured.is_empty())
+            .count()
+            == 3,
+        "every captured light has emitter_measured:\n{toml}"
+    );
+    for l in &mut file.light {
+        l.emitter_measured.clear();
+    }
+    let profiles = visobjd_scene::Scene::parse(&scene, &file.to_toml().expect("toml"))
+        .expect("the scene without measurements loads");
+    let mut figures = Vec::new();
+    let truth = [[0.60, 0.35, 0.25], [0.33, 0.52, 0.6], [0.16, 0.11, 0.1]];
+    for (ch, target) in [
+        (2, [0.85, 0.35, 0.75]),
+        (3, [0.9, 0.6, 0.25]),
+        (4, [0.4, 0.55, 0.9]),
+    ] {
+        let [aimed, trusting] =
+            [&measured, &profiles].map(|s| sent_colour_error(s, ch, target, &truth));
+        eprintln!(
+            "light {ch}, sRGB {target:?}: Delta E 2000 {aimed:.2} aimed with the measured emitters, {trusting:.2} with the profile's"
+        );
+        figures.push((ch, aimed, trusting));
+    }
+    for (ch, aimed, trusting) in figures {
+        assert!(aimed < 4.0, "light {ch}: {aimed:.2} with measured emitters");
+        assert!(
+            trusting > 2.0 * aimed,
+            "light {ch}: {trusting:.2} with the profile's"
+        );
+    }
     // Run again: every image is there, nothing is shot twice.
     let again = capture(&cfg, &["--lights", "2-4", "--emitters", "--format", "raw"]);
     let stdout = String::from_utf8_lossy(&again.stdout);

@@ -297,6 +297,8 @@ fn merge(rig: &Rig, name: &str, old: Option<&SceneFile>, prune: bool) -> Merged 
         if before.is_none() {
             new.push(f.channel);
         }
+        // What capture made of the light's emitters holds while they are still the same.
+        let kept = before.filter(|l| same_emitters(&l.emitter_basis, profile));
         lights.push(LightFile {
             channel: f.channel,
             name: Some(f.name.clone()).filter(|n| !n.is_empty()),
@@ -309,10 +311,8 @@ fn merge(rig: &Rig, name: &str, old: Option<&SceneFile>, prune: bool) -> Merged 
             profile: profile.name.clone(),
             universe: f.universe,
             address: f.address,
-            emitter_basis: before
-                .filter(|l| same_emitters(&l.emitter_basis, profile))
-                .map(|l| l.emitter_basis.clone())
-                .unwrap_or_default(),
+            emitter_basis: kept.map(|l| l.emitter_basis.clone()).unwrap_or_default(),
+            emitter_measured: kept.map(|l| l.emitter_measured.clone()).unwrap_or_default(),
         });
     }
     let imported = lights.len();

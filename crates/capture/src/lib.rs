@@ -28,7 +28,7 @@ use visobjd_hdr::{BracketSettings, ExposureFit, MergeSettings, Radiance, Respons
 use visobjd_scene::emitter::colour::{ciede2000, linear_srgb_to_xyz, xyz_to_lab};
 use visobjd_scene::emitter::{ColourModel, MAX_EMITTERS};
 use visobjd_scene::look::{Level, Look};
-use visobjd_scene::{Scene, SceneFile};
+use visobjd_scene::{MeasuredEmitter, Scene, SceneFile};
 
 /// What the camera is asked to write.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -457,6 +457,7 @@ impl Session<'_> {
             .map(|e| e.name.clone())
             .collect();
         let mut images = BTreeMap::new();
+        let mut sums = Vec::with_capacity(names.len());
         let mut written = 0;
         for (k, name) in names.iter().enumerate() {
             let path = emitter_path(&basis, name);
@@ -470,7 +471,12 @@ impl Session<'_> {
                 .emitters
                 .get(&ch)
                 .is_some_and(|m| m.contains_key(name));
-            if !(done && path.is_file()) {
+            let kept = done
+                .then(|| visobjd_compositor::basis::read_exr(&path).ok())
+                .flatten();
+            if let Some(image) = kept {
+                sums.push((name.clone(), radiance_sum(&image.pixels)));
+            } else {
                 if self.stop.load(Ordering::SeqCst) {
                     return Err(CaptureError::Stopped);
                 }
@@ -487,6 +493,7 @@ impl Session<'_> {
                 }
                 let image = visobjd_hdr::subtract_ambient(&merged.radiance, ambient)?;
                 visobjd_hdr::write_exr(&path, &image)?;
+                sums.push((name.clone(), radiance_sum(&image.pixels)));
                 let dmx = self.dmx_of(l, &self.patch.emitter_alone(&look, l, k));
                 self.record.emitters.entry(ch).or_default().insert(
                     name.clone(),
@@ -504,7 +511,13 @@ impl Session<'_> {
             images.insert(name.clone(), relative);
         }
         if !images.is_empty() {
-            set_emitter_basis(self.scene_dir, ch, images)?;
+            let measured = measure_emitters(&sums);
+            if measured.is_empty() {
+                self.progress.warn(&format!(
+                    "light {ch} ({light_name}): an emitter's image holds no measurable light, so its colour is solved with the profile's emitters"
+                ));
+            }
+            set_emitter_basis(self.scene_dir, ch, images, measured)?;
         }
         Ok(written)
     }
@@ -536,7 +549,10 @@ impl Session<'_> {
             Some((l, k)) => self
                 .output
                 .set_frame(look.clone(), self.patch.emitter_alone(look, l, k)),
-            None => self.output.set_look(look.clone(), 0.0),
+            // Through the session's patch, so the colour validation can send its levels.
+            None => self
+                .output
+                .set_frame(look.clone(), self.patch.unmastered(look)),
         }
         let ticks = self.output.stats().ticks;
         std::thread::sleep(self.opts.settle);
@@ -783,7 +799,14 @@ impl Session<'_> {
         &mut self,
         ambient: &Radiance,
     ) -> Result<Option<ColourValidation>, CaptureError> {
-        let scene = Scene::load(self.scene_dir).map_err(|e| CaptureError::Files(e.to_string()))?;
+        let mut scene =
+            Scene::load(self.scene_dir).map_err(|e| CaptureError::Files(e.to_string()))?;
+        // Levels solved with the profiles' emitters, sent and previewed alike: this checks
+        // the images, whatever the measured emitters make of a colour (tests/capture.rs
+        // checks those against the sim's true emitters).
+        for light in &mut scene.lights {
+            light.emitter_measured.clear();
+        }
         let lit: Vec<usize> = (0..scene.lights.len())
             .filter(|&l| {
                 !scene.lights[l].emitter_basis.is_empty()
@@ -825,8 +848,10 @@ impl Session<'_> {
             light.emitter_basis.clear();
         }
         let white_only = preview(&part)?;
-        let shot = self.shoot_look(&look, None, false)?.radiance;
-        let shot = visobjd_hdr::subtract_ambient(&shot, ambient)?;
+        let patch = std::mem::replace(&mut self.patch, Patch::new(&scene));
+        let shot = self.shoot_look(&look, None, false);
+        self.patch = patch;
+        let shot = visobjd_hdr::subtract_ambient(&shot?.radiance, ambient)?;
         Ok(colour_difference(&shot, &per_emitter)
             .zip(colour_difference(&shot, &white_only))
             .map(|(per_emitter, white_only)| ColourValidation {
@@ -884,13 +909,46 @@ fn emitter_path(basis: &Path, name: &str) -> PathBuf {
     basis.with_file_name(format!("{stem}-{name}.exr"))
 }
 
+/// The linear sRGB radiance of an image summed over its pixels: the light the camera
+/// received from it.
+fn radiance_sum(pixels: &[[f32; 3]]) -> [f64; 3] {
+    pixels.iter().fold([0.0; 3], |mut s, p| {
+        for (s, v) in s.iter_mut().zip(p) {
+            *s += f64::from(*v);
+        }
+        s
+    })
+}
+
+/// Each emitter's CIE xy and flux from its image's radiance sum (`sums`: emitter name and
+/// linear sRGB sum), the flux relative to the sum of the light's emitters' Y: the emitters
+/// as the camera sees them, on one scale, which is all the colour solve needs. Empty when
+/// an emitter's light is not a colour (nothing measurable, or noise below zero), so the
+/// profile's emitters stand.
+fn measure_emitters(sums: &[(String, [f64; 3])]) -> BTreeMap<String, MeasuredEmitter> {
+    let xyz: Vec<[f64; 3]> = sums.iter().map(|(_, s)| linear_srgb_to_xyz(*s)).collect();
+    let total: f64 = xyz.iter().map(|v| v[1]).sum();
+    let measured: Option<BTreeMap<String, MeasuredEmitter>> = sums
+        .iter()
+        .zip(&xyz)
+        .map(|((name, _), v)| {
+            let all = v[0] + v[1] + v[2];
+            let (x, y, flux) = (v[0] / all, v[1] / all, v[1] / total);
+            let ok = [x, y, flux].iter().all(|c| c.is_finite() && *c > 0.0) && x + y < 1.0;
+            ok.then(|| (name.clone(), MeasuredEmitter { xy: [x, y], flux }))
+        })
+        .collect();
+    measured.unwrap_or_default()
+}
+
 /// Names light `channel`'s per-emitter images in `scene_dir/scene.toml`
-/// (`emitter_basis`), checked as a scene before the atomic write; unchanged, nothing is
+/// (`emitter_basis`) with the emitters measured from them (`emitter_measured`), checked as a scene before the atomic write; unchanged, nothing is
 /// written.
 fn set_emitter_basis(
     scene_dir: &Path,
     channel: u32,
     images: BTreeMap<String, String>,
+    measured: BTreeMap<String, MeasuredEmitter>,
 ) -> Result<(), CaptureError> {
     let path = scene_dir.join("scene.toml");
     let fail = |e: String| CaptureError::Files(format!("{}: {e}", path.display()));
@@ -899,10 +957,11 @@ fn set_emitter_basis(
     let Some(light) = file.light.iter_mut().find(|l| l.channel == channel) else {
         return Err(fail(format!("light {channel} is no longer in the scene")));
     };
-    if light.emitter_basis == images {
+    if light.emitter_basis == images && light.emitter_measured == measured {
         return Ok(());
     }
     light.emitter_basis = images;
+    light.emitter_measured = measured;
     let text = file.to_toml().map_err(fail)?;
     Scene::parse(scene_dir, &text).map_err(|e| fail(e.to_string()))?;
     visobjd_files::write_atomic(&path, text.as_bytes()).map_err(|e| fail(e.to_string()))

@@ -482,9 +482,7 @@ pub fn load(scene: &Scene, widths: &[(usize, Precision)]) -> Result<Vec<BasisIma
             .collect();
         return load(scene, &single);
     }
-    let colours: Vec<ColourModel> = (0..lights)
-        .map(|l| ColourModel::new(scene.profile(l)))
-        .collect();
+    let colours: Vec<ColourModel> = (0..lights).map(|l| scene.colour_model(l)).collect();
     for img in &mut images {
         img.colours.clone_from(&colours);
     }

@@ -316,7 +316,8 @@ impl Output {
 
     /// Puts `frame` (unmastered slot levels of this output's patch, as
     /// [`Patch::emitter_alone`] makes them) on the wire at once, standing for `look`
-    /// until the next [`Output::set_look`]: what capture uses to light one emitter alone.
+    /// until the next [`Output::set_look`]: what capture uses to light one emitter alone,
+    /// or a look solved through another patch.
     pub fn set_frame(&self, look: Look, frame: Frame) {
         let (look, frame) = (Arc::new(look), Arc::new(frame));
         self.desired.send_modify(|d| {

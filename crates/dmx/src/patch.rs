@@ -128,7 +128,7 @@ impl Patch {
                 offset,
                 slots: profile.slots.clone(),
                 has_intensity,
-                colour: ColourModel::new(profile),
+                colour: scene.colour_model(i),
             });
         }
         Patch {

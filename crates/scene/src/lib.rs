@@ -14,6 +14,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
+use crate::emitter::ColourModel;
 use crate::profile::{Profile, ProfileFile};
 
 /// Why a scene did not load; each message names the file and the problem.
@@ -111,6 +112,22 @@ pub struct LightFile {
     /// lit by that emitter alone at full, so the preview mixes what the camera saw.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub emitter_basis: BTreeMap<String, String>,
+    /// Each emitter's colour as the camera saw it in its `emitter_basis` image (capture
+    /// measures it), by emitter name: the colour solve aims with these instead of the
+    /// profile's, so the light reaches the colour asked of it.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub emitter_measured: BTreeMap<String, MeasuredEmitter>,
+}
+
+/// One emitter's colour measured from its image: CIE 1931 xy and its output relative to
+/// the light's other emitters (the Y of CIE xyY).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MeasuredEmitter {
+    /// CIE 1931 x, y.
+    pub xy: [f64; 2],
+    /// Output at full relative to the light's other emitters.
+    pub flux: f64,
 }
 
 impl SceneFile {
@@ -149,6 +166,9 @@ pub struct Light {
     /// alone at full), resolved against the scene folder; empty for a light captured at
     /// white only, whose colours are previewed from its white image and colour model.
     pub emitter_basis: Vec<PathBuf>,
+    /// Each emitter's CIE XYZ at full as measured from its image (`emitter_measured`), in
+    /// slot order; empty: the profile's emitters.
+    pub emitter_measured: Vec<[f64; 3]>,
 }
 
 /// A light group ("system"): sampling assigns one value per group by default.
@@ -322,6 +342,7 @@ impl Scene {
                 ))
             })?;
             let emitter_basis = emitter_basis(l, &profiles[profile]).map_err(invalid)?;
+            let emitter_measured = emitter_measured(l, &profiles[profile]).map_err(invalid)?;
             groups[group].lights.push(i);
             lights.push(Light {
                 channel: l.channel,
@@ -335,6 +356,7 @@ impl Scene {
                 universe: l.universe,
                 address: l.address,
                 emitter_basis: emitter_basis.into_iter().map(|p| dir.join(p)).collect(),
+                emitter_measured,
             });
         }
         // A declared group no light uses would be an empty sampling unit: drop it.
@@ -378,6 +400,18 @@ impl Scene {
         &self.profiles[self.lights[light].profile]
     }
 
+    /// Light `i`'s colour model: from its measured emitters where capture measured them,
+    /// else from its profile's. The DMX output, the preview and the Eos export all take it
+    /// from here, so they mix the same light.
+    pub fn colour_model(&self, light: usize) -> ColourModel {
+        let measured = &self.lights[light].emitter_measured;
+        if measured.is_empty() {
+            ColourModel::new(self.profile(light))
+        } else {
+            ColourModel::from_emitters(measured.clone())
+        }
+    }
+
     /// A short description of the channel range, for "light 99 is not in the scene" errors.
     pub fn channel_range(&self) -> String {
         match (self.lights.first(), self.lights.last()) {
@@ -393,12 +427,7 @@ fn emitter_basis<'a>(l: &'a LightFile, profile: &Profile) -> Result<Vec<&'a Path
     if l.emitter_basis.is_empty() {
         return Ok(Vec::new());
     }
-    let names: Vec<&str> = profile
-        .emitters
-        .iter()
-        .take(emitter::MAX_EMITTERS)
-        .map(|e| e.name.as_str())
-        .collect();
+    let names = mixed_emitters(profile);
     if let Some(extra) = l
         .emitter_basis
         .keys()
@@ -430,6 +459,67 @@ fn emitter_basis<'a>(l: &'a LightFile, profile: &Profile) -> Result<Vec<&'a Path
                     l.channel
                 )
             })
+        })
+        .collect()
+}
+
+/// The emitter names a light's colour model mixes, in slot order.
+fn mixed_emitters(profile: &Profile) -> Vec<&str> {
+    profile
+        .emitters
+        .iter()
+        .take(emitter::MAX_EMITTERS)
+        .map(|e| e.name.as_str())
+        .collect()
+}
+
+/// A light's `emitter_measured` as CIE XYZ in its profile's emitter order: none, or every
+/// emitter the colour model mixes with a finite positive flux and an xy of a real colour
+/// (0 < x, 0 < y, x + y < 1).
+fn emitter_measured(l: &LightFile, profile: &Profile) -> Result<Vec<[f64; 3]>, String> {
+    if l.emitter_measured.is_empty() {
+        return Ok(Vec::new());
+    }
+    let names = mixed_emitters(profile);
+    if let Some(extra) = l
+        .emitter_measured
+        .keys()
+        .find(|k| !names.contains(&k.as_str()))
+    {
+        return Err(format!(
+            "light {}: emitter_measured `{extra}` is not an emitter of profile `{}`",
+            l.channel, profile.name
+        ));
+    }
+    names
+        .iter()
+        .map(|n| {
+            let m = l.emitter_measured.get(*n).ok_or_else(|| {
+                format!(
+                    "light {}: emitter_measured has no `{n}` (give every emitter, or none: capture --emitters measures them)",
+                    l.channel
+                )
+            })?;
+            let [x, y] = m.xy;
+            let xy_ok = x.is_finite() && y.is_finite() && x > 0.0 && y > 0.0 && x + y < 1.0;
+            if !xy_ok {
+                return Err(format!(
+                    "light {}: emitter_measured `{n}` xy [{x}, {y}] is not a colour (need 0 < x, 0 < y, x + y < 1)",
+                    l.channel
+                ));
+            }
+            if !(m.flux.is_finite() && m.flux > 0.0) {
+                return Err(format!(
+                    "light {}: emitter_measured `{n}` flux {} must be a positive number",
+                    l.channel, m.flux
+                ));
+            }
+            Ok(crate::profile::Emitter {
+                name: (*n).to_string(),
+                xy: m.xy,
+                flux: m.flux,
+            }
+            .xyz())
         })
         .collect()
 }
@@ -532,6 +622,69 @@ mod tests {
                     "{light}[light.emitter_basis]\nred = \"../r.exr\"\ngreen = \"g.exr\"\nblue = \"b.exr\"\n"
                 ),
                 "light 4: emitter_basis `../r.exr` must be a relative path inside the scene folder",
+            ),
+        ] {
+            let e = Scene::parse(Path::new("/s"), &text)
+                .unwrap_err()
+                .to_string();
+            assert_eq!(e, format!("/s/scene.toml: {says}"));
+        }
+    }
+
+    #[test]
+    fn emitter_measured_builds_the_colour_model_and_is_checked() {
+        let light = "[[light]]\nchannel = 4\nbasis = \"b.exr\"\nprofile = \"rgb\"\nuniverse = 1\naddress = 1\n";
+        let table = |red: &str| {
+            format!(
+                "{light}[light.emitter_measured]\nred = {red}\ngreen = {{ xy = [0.33, 0.52], flux = 0.6 }}\nblue = {{ xy = [0.16, 0.11], flux = 0.1 }}\n"
+            )
+        };
+        let text = table("{ xy = [0.6, 0.35], flux = 0.25 }");
+        let measured = Scene::parse(Path::new("/s"), &text).expect("parses");
+        let plain = Scene::parse(Path::new("/s"), light).expect("parses");
+        let xyz = |x, y, flux| {
+            crate::profile::Emitter {
+                name: String::new(),
+                xy: [x, y],
+                flux,
+            }
+            .xyz()
+        };
+        let want = ColourModel::from_emitters(vec![
+            xyz(0.6, 0.35, 0.25),
+            xyz(0.33, 0.52, 0.6),
+            xyz(0.16, 0.11, 0.1),
+        ]);
+        assert_eq!(measured.colour_model(0), want, "the measured emitters");
+        assert_eq!(plain.colour_model(0), ColourModel::new(plain.profile(0)));
+        assert_ne!(measured.colour_model(0), plain.colour_model(0));
+        let file = SceneFile::parse(Path::new("/s/scene.toml"), &text).expect("file");
+        let again = Scene::parse(Path::new("/s"), &file.to_toml().expect("toml")).expect("again");
+        assert_eq!(
+            again.colour_model(0),
+            want,
+            "written back, it reads the same"
+        );
+        for (text, says) in [
+            (
+                format!("{light}[light.emitter_measured]\nred = {{ xy = [0.6, 0.35], flux = 1.0 }}\n"),
+                "light 4: emitter_measured has no `green` (give every emitter, or none: capture --emitters measures them)".to_string(),
+            ),
+            (
+                table("{ xy = [0.6, 0.35], flux = 0.0 }"),
+                "light 4: emitter_measured `red` flux 0 must be a positive number".into(),
+            ),
+            (
+                table("{ xy = [0.6, 0.45], flux = 0.2 }"),
+                "light 4: emitter_measured `red` xy [0.6, 0.45] is not a colour (need 0 < x, 0 < y, x + y < 1)".into(),
+            ),
+            (
+                table("{ xy = [0.6, nan], flux = 0.2 }"),
+                "light 4: emitter_measured `red` xy [0.6, NaN] is not a colour (need 0 < x, 0 < y, x + y < 1)".into(),
+            ),
+            (
+                format!("{}white = {{ xy = [0.3, 0.3], flux = 1.0 }}\n", table("{ xy = [0.6, 0.35], flux = 0.2 }")),
+                "light 4: emitter_measured `white` is not an emitter of profile `rgb`".into(),
             ),
         ] {
             let e = Scene::parse(Path::new("/s"), &text)

@@ -30,7 +30,12 @@ pub struct ColourModel {
 impl ColourModel {
     /// The model of a light with `profile`.
     pub fn new(profile: &Profile) -> ColourModel {
-        let mut emitters = profile.emitters_xyz();
+        ColourModel::from_emitters(profile.emitters_xyz())
+    }
+
+    /// The model of a light whose additive emitters make `emitters` (CIE XYZ at full, slot
+    /// order): a profile's, or those capture measured.
+    pub fn from_emitters(mut emitters: Vec<[f64; 3]>) -> ColourModel {
         emitters.truncate(MAX_EMITTERS);
         let mut model = ColourModel {
             emitters,
