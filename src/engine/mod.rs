@@ -515,17 +515,15 @@ impl Engine {
             visobjd_method::objective::decode_reference_bytes(bytes).map_err(&refused)?;
         }
         let path = self.references.join(name);
-        if path.exists() {
-            return Err((
+        visobjd_files::write_new_atomic(&path, bytes).map_err(|e| match e.kind() {
+            std::io::ErrorKind::AlreadyExists => (
                 true,
                 format!("upload `{name}`: a reference of that name exists; choose another name"),
-            ));
-        }
-        visobjd_files::write_atomic(&path, bytes).map_err(|e| {
-            refused(format!(
+            ),
+            _ => refused(format!(
                 "cannot write it in the references folder {}: {e}",
                 self.references.display()
-            ))
+            )),
         })?;
         tracing::info!("reference {name} stored ({} bytes)", bytes.len());
         Ok(name.to_string())
@@ -843,8 +841,10 @@ impl Engine {
     /// Pushes messages to every live subscriber (expired or unreachable ones are dropped)
     /// and to the web pages' event streams.
     pub fn notify(&self, msgs: &[OscMessage]) {
-        // No page listening is no error.
-        let _ = self.changes.send(msgs.into());
+        // No page listening is no error (and then no copy of the batch is made).
+        if self.changes.receiver_count() > 0 {
+            let _ = self.changes.send(msgs.into());
+        }
         let mut subs = self.subscribers.lock().unwrap_or_else(|p| p.into_inner());
         subs.retain(|s| {
             s.last_seen.elapsed() < SUBSCRIPTION

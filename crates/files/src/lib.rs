@@ -11,6 +11,26 @@ use serde::de::DeserializeOwned;
 
 /// Writes `bytes` to `path` atomically.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    write_via_temp(path, bytes, |tmp, path| fs::rename(tmp, path))
+}
+
+/// Writes `bytes` to `path` atomically unless `path` exists: then nothing is written and
+/// the error is `AlreadyExists`. The check and the write are one step (a hard link of the
+/// temp file), so two writers of one name cannot replace each other's file.
+pub fn write_new_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    write_via_temp(path, bytes, |tmp, path| {
+        fs::hard_link(tmp, path)?;
+        fs::remove_file(tmp)
+    })
+}
+
+/// Writes `bytes` to a temp file beside `path`, syncs it, puts it in place with `place`,
+/// then syncs the folder; the temp file is removed if any step fails.
+fn write_via_temp(
+    path: &Path,
+    bytes: &[u8],
+    place: impl FnOnce(&Path, &Path) -> std::io::Result<()>,
+) -> std::io::Result<()> {
     let dir = path.parent().unwrap_or(Path::new("."));
     fs::create_dir_all(dir)?;
     let name = path
@@ -26,8 +46,8 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
         f.write_all(bytes)?;
         f.sync_all()?;
         drop(f);
-        fs::rename(&tmp, path)?;
-        // The rename itself is durable only once the folder is synced.
+        place(&tmp, path)?;
+        // The new name is durable only once the folder is synced.
         File::open(dir)?.sync_all()
     })();
     if result.is_err() {
@@ -139,6 +159,39 @@ mod tests {
             .map(|e| e.unwrap().file_name())
             .collect();
         assert_eq!(names, vec![std::ffi::OsString::from("live.json")]);
+    }
+
+    #[test]
+    fn a_new_write_never_replaces_and_leaves_no_temp_files() {
+        let d = dir("new");
+        let p = d.join("ref.png");
+        write_new_atomic(&p, b"first").unwrap();
+        let again = write_new_atomic(&p, b"second").unwrap_err();
+        assert_eq!(again.kind(), std::io::ErrorKind::AlreadyExists);
+        assert_eq!(fs::read(&p).unwrap(), b"first");
+        // Racing writers of one name: exactly one wins, whole.
+        let q = d.join("race.png");
+        let wins = std::thread::scope(|sc| {
+            let writers: Vec<_> = (0..8u8)
+                .map(|i| {
+                    let q = &q;
+                    sc.spawn(move || write_new_atomic(q, &[i; 64]).is_ok())
+                })
+                .collect();
+            writers
+                .into_iter()
+                .filter_map(|w| w.join().ok())
+                .filter(|&won| won)
+                .count()
+        });
+        assert_eq!(wins, 1);
+        let won = fs::read(&q).unwrap();
+        assert!(won.len() == 64 && won.iter().all(|&b| b == won[0]));
+        let names: Vec<_> = fs::read_dir(&d)
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        assert_eq!(names.len(), 2, "{names:?}");
     }
 
     #[test]
