@@ -182,11 +182,8 @@ fn write(out: &Path, file: &SceneFile) -> anyhow::Result<PathBuf> {
 /// one image for each of its emitters, by name. A changed colour system drops them (the
 /// light is previewed from its white image until it is captured per emitter again).
 fn same_emitters(images: &std::collections::BTreeMap<String, String>, profile: &Profile) -> bool {
-    images.len() == profile.emitters.len()
-        && profile
-            .emitters
-            .iter()
-            .all(|e| images.contains_key(&e.name))
+    let names = profile.mixed_emitters();
+    images.len() == names.len() && names.iter().all(|n| images.contains_key(*n))
 }
 
 /// Where a new light's basis image goes: `basis/NNN.exr` by channel.

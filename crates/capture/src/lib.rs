@@ -26,7 +26,7 @@ use visobjd_compositor::basis::Precision;
 use visobjd_dmx::{Frame, Output, Patch};
 use visobjd_hdr::{BracketSettings, ExposureFit, MergeSettings, Radiance, Response};
 use visobjd_scene::emitter::colour::{ciede2000, linear_srgb_to_xyz, xyz_to_lab};
-use visobjd_scene::emitter::{ColourModel, MAX_EMITTERS};
+use visobjd_scene::emitter::ColourModel;
 use visobjd_scene::look::{Level, Look};
 use visobjd_scene::{MeasuredEmitter, Scene, SceneFile};
 
@@ -451,10 +451,9 @@ impl Session<'_> {
         let names: Vec<String> = self
             .scene
             .profile(l)
-            .emitters
-            .iter()
-            .take(MAX_EMITTERS)
-            .map(|e| e.name.clone())
+            .mixed_emitters()
+            .into_iter()
+            .map(str::to_string)
             .collect();
         let mut images = BTreeMap::new();
         let mut sums = Vec::with_capacity(names.len());

@@ -427,7 +427,7 @@ fn emitter_basis<'a>(l: &'a LightFile, profile: &Profile) -> Result<Vec<&'a Path
     if l.emitter_basis.is_empty() {
         return Ok(Vec::new());
     }
-    let names = mixed_emitters(profile);
+    let names = profile.mixed_emitters();
     if let Some(extra) = l
         .emitter_basis
         .keys()
@@ -463,16 +463,6 @@ fn emitter_basis<'a>(l: &'a LightFile, profile: &Profile) -> Result<Vec<&'a Path
         .collect()
 }
 
-/// The emitter names a light's colour model mixes, in slot order.
-fn mixed_emitters(profile: &Profile) -> Vec<&str> {
-    profile
-        .emitters
-        .iter()
-        .take(emitter::MAX_EMITTERS)
-        .map(|e| e.name.as_str())
-        .collect()
-}
-
 /// A light's `emitter_measured` as CIE XYZ in its profile's emitter order: none, or every
 /// emitter the colour model mixes with a finite positive flux and an xy of a real colour
 /// (0 < x, 0 < y, x + y < 1).
@@ -480,7 +470,7 @@ fn emitter_measured(l: &LightFile, profile: &Profile) -> Result<Vec<[f64; 3]>, S
     if l.emitter_measured.is_empty() {
         return Ok(Vec::new());
     }
-    let names = mixed_emitters(profile);
+    let names = profile.mixed_emitters();
     if let Some(extra) = l
         .emitter_measured
         .keys()

@@ -193,6 +193,17 @@ const BUILT_IN: &[(&str, &[&str])] = &[
 ];
 
 impl Profile {
+    /// The names of the emitters the colour model mixes (at most
+    /// [`crate::emitter::MAX_EMITTERS`]), in slot order: what per-emitter images and
+    /// measurements are kept for.
+    pub fn mixed_emitters(&self) -> Vec<&str> {
+        self.emitters
+            .iter()
+            .take(crate::emitter::MAX_EMITTERS)
+            .map(|e| e.name.as_str())
+            .collect()
+    }
+
     /// A built-in profile by name.
     pub fn built_in(name: &str) -> Option<Profile> {
         let (n, channels) = BUILT_IN.iter().find(|(n, _)| *n == name)?;
