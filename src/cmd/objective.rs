@@ -9,6 +9,7 @@ use crate::engine::session::{Entry, Session};
 use crate::engine::{Engine, Outcome, msg};
 use crate::osc::args::{self, Request};
 use visobjd_method::objective::{Aspects, Objective, Region};
+use visobjd_method::targeting::Footprints;
 
 pub enum Cmd {
     /// Reads the image first (slow, outside the session), then adds the objective.
@@ -123,17 +124,9 @@ impl Cmd {
         {
             // While exploring, the region goes to the explore slot: no disk, no generate
             // waited for; the session takes it with the gallery drawn from it.
-            let (id, lights) = {
-                let s = e.session();
-                (
-                    find(&s, id)?.1,
-                    footprints.select(region).iter().filter(|&&on| on).count(),
-                )
-            };
+            let id = find(&e.session(), id)?.1;
             if e.explore_region(id, region) {
-                // Backups get the regions with the explore galleries, not each update.
-                crate::backup::Pending::take();
-                return Ok(vec![region_reply(id, region, lights)]);
+                return Ok(vec![region_reply(id, region, footprints)]);
             }
         }
         e.commit(|s| {
@@ -149,9 +142,8 @@ impl Cmd {
                 }
                 Edit::Region { id, region } => {
                     let (i, id) = find(s, id)?;
-                    let lights = footprints.select(region).iter().filter(|&&on| on).count();
                     s.objectives[i].objective.region = region;
-                    Outcome::reply(region_reply(id, region, lights)).saved()
+                    Outcome::reply(region_reply(id, region, footprints)).saved()
                 }
                 Edit::Palette { id } => {
                     let (i, id) = find(s, id)?;
@@ -267,8 +259,9 @@ fn find(s: &Session, which: Which) -> Result<(usize, u32), String> {
     })
 }
 
-/// `/vo/objective/region id x0 y0 x1 y1 lights`.
-fn region_reply(id: u32, region: Region, lights: usize) -> OscMessage {
+/// `/vo/objective/region id x0 y0 x1 y1 lights`: with how many lights the region selects.
+fn region_reply(id: u32, region: Region, footprints: &Footprints) -> OscMessage {
+    let lights = footprints.select(region).iter().filter(|&&on| on).count();
     msg(
         "/vo/objective/region",
         vec![

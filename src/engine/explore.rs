@@ -157,6 +157,8 @@ impl Engine {
         st.dirty = true;
         st.last_update = Some(Instant::now());
         self.explore.changed.notify_all();
+        // Not forwarded as itself: backups get the regions with the explore galleries.
+        crate::backup::Pending::take();
         true
     }
 
