@@ -51,31 +51,25 @@ pub struct Partial {
 }
 
 impl Partial {
-    fn constant_str(s: &str) -> Partial {
+    fn constant(conversion: &'static str, value: impl ToString) -> Partial {
         Partial {
             kind: "CONSTANT",
-            conversion: "STRING",
-            value: s.to_string(),
+            conversion,
+            value: value.to_string(),
             scale: (0.0, 1.0),
         }
+    }
+
+    fn constant_str(s: &str) -> Partial {
+        Partial::constant("STRING", s)
     }
 
     fn constant_float(v: f32) -> Partial {
-        Partial {
-            kind: "CONSTANT",
-            conversion: "FLOAT",
-            value: v.to_string(),
-            scale: (0.0, 1.0),
-        }
+        Partial::constant("FLOAT", v)
     }
 
     fn constant_int(i: usize) -> Partial {
-        Partial {
-            kind: "CONSTANT",
-            conversion: "INTEGER",
-            value: i.to_string(),
-            scale: (0.0, 1.0),
-        }
+        Partial::constant("INTEGER", i)
     }
 
     fn value(key: &str, conversion: &'static str, scale: (f32, f32)) -> Partial {
