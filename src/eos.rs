@@ -175,23 +175,17 @@ fn percent(v: f32, decimals: usize) -> String {
 
 /// Ascending channels as an Eos selection: runs become `Thru`, the rest are joined by `+`.
 pub fn channel_list(channels: &[u32]) -> String {
-    let mut parts = Vec::new();
-    let mut i = 0;
-    while i < channels.len() {
-        let start = channels[i];
-        let mut end = start;
-        while i + 1 < channels.len() && channels[i + 1] == end + 1 {
-            i += 1;
-            end = channels[i];
-        }
-        parts.push(if end > start {
-            format!("{start} Thru {end}")
-        } else {
-            start.to_string()
-        });
-        i += 1;
-    }
-    parts.join(" + ")
+    visobjd_rig::channel_runs(channels)
+        .iter()
+        .map(|&(start, end)| {
+            if end > start {
+                format!("{start} Thru {end}")
+            } else {
+                start.to_string()
+            }
+        })
+        .collect::<Vec<_>>()
+        .join(" + ")
 }
 
 /// Sends the command lines to the console as `/eos/user/<n>/newcmd` messages, in order.

@@ -51,20 +51,8 @@ pub struct Args {
 
 /// `1-44,50` as channels.
 fn channels(spec: &str) -> Result<Vec<u32>, String> {
-    let mut out = Vec::new();
-    for part in spec.split(',').map(str::trim).filter(|p| !p.is_empty()) {
-        let bad = || format!("--lights {spec}: `{part}` is not a channel or a range like 1-44");
-        let (a, b) = match part.split_once('-') {
-            Some((a, b)) => (a.trim(), b.trim()),
-            None => (part, part),
-        };
-        let (a, b): (u32, u32) = (a.parse().map_err(|_| bad())?, b.parse().map_err(|_| bad())?);
-        if a > b || b - a > 100_000 {
-            return Err(bad());
-        }
-        out.extend(a..=b);
-    }
-    Ok(out)
+    visobjd_rig::parse_channels(spec)
+        .map_err(|part| format!("--lights {spec}: `{part}` is not a channel or a range like 1-44"))
 }
 
 /// A progress bar with the light being shot and the time left.

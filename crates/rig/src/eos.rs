@@ -491,19 +491,9 @@ pub fn patch_entry(channel: u32, part: u32, list: &[Arg]) -> Result<EosChannel, 
 pub fn group_entry(number: &str, list: &[Arg], channels: &[Arg]) -> Result<EosGroup, String> {
     let mut out = Vec::new();
     for a in channels.iter().skip(field::GROUP_LABEL) {
-        let t = a.text();
-        for item in t.split(',').map(str::trim).filter(|s| !s.is_empty()) {
-            let bad = || format!("group {number}: `{item}` is not a channel or a range");
-            let (a, b) = match item.split_once('-') {
-                Some((a, b)) => (a.trim(), b.trim()),
-                None => (item, item),
-            };
-            let (a, b): (u32, u32) = (a.parse().map_err(|_| bad())?, b.parse().map_err(|_| bad())?);
-            if b < a || b - a > 100_000 {
-                return Err(bad());
-            }
-            out.extend(a..=b);
-        }
+        let parsed = crate::parse_channels(&a.text())
+            .map_err(|item| format!("group {number}: `{item}` is not a channel or a range"))?;
+        out.extend(parsed);
     }
     Ok(EosGroup {
         number: number.to_string(),

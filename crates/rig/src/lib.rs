@@ -187,8 +187,9 @@ fn describe(f: &Fixture) -> String {
     format!("channel {} \"{}\"", f.channel, f.name)
 }
 
-/// `channels 101-108, 110` (sorted, runs joined).
-pub fn channel_list(channels: &[u32]) -> String {
+/// The channels as runs of consecutive numbers `(first, last)`, ascending, each channel
+/// once: what every channel list (here, the Eos selection) is written from.
+pub fn channel_runs(channels: &[u32]) -> Vec<(u32, u32)> {
     let mut sorted = channels.to_vec();
     sorted.sort_unstable();
     sorted.dedup();
@@ -199,7 +200,27 @@ pub fn channel_list(channels: &[u32]) -> String {
             _ => runs.push((c, c)),
         }
     }
-    let parts: Vec<String> = runs
+    runs
+}
+
+/// Channels written as `1-100, 200` (commas, ranges), the way an Eos group's channel list
+/// and `visobjd capture --lights` spell them; `Err` names the part that is not a channel
+/// or a range (a range spans at most 100,000).
+pub fn parse_channels(spec: &str) -> Result<Vec<u32>, &str> {
+    let mut out = Vec::new();
+    for part in spec.split(',').map(str::trim).filter(|p| !p.is_empty()) {
+        let (a, b) = part.split_once('-').unwrap_or((part, part));
+        match (a.trim().parse::<u32>(), b.trim().parse::<u32>()) {
+            (Ok(a), Ok(b)) if a <= b && b - a <= 100_000 => out.extend(a..=b),
+            _ => return Err(part),
+        }
+    }
+    Ok(out)
+}
+
+/// `channels 101-108, 110` (sorted, runs joined).
+pub fn channel_list(channels: &[u32]) -> String {
+    let parts: Vec<String> = channel_runs(channels)
         .iter()
         .map(|&(a, b)| {
             if a == b {
@@ -443,6 +464,16 @@ mod tests {
             "channels 101-103, 108, 110"
         );
         assert_eq!(channel_list(&[7]), "channel 7");
+    }
+
+    #[test]
+    fn channel_specs_parse_and_name_the_bad_part() {
+        assert_eq!(parse_channels("1-3, 7,9 - 10"), Ok(vec![1, 2, 3, 7, 9, 10]));
+        assert_eq!(parse_channels(""), Ok(vec![]));
+        assert_eq!(parse_channels("1-3,x"), Err("x"));
+        assert_eq!(parse_channels("5-2"), Err("5-2"));
+        assert_eq!(parse_channels("1-200000"), Err("1-200000"));
+        assert_eq!(channel_runs(&[3, 1, 2, 2, 9]), vec![(1, 3), (9, 9)]);
     }
 
     #[test]
