@@ -620,9 +620,17 @@ fn number_jpg<T: std::str::FromStr>(file: &str) -> Option<T> {
 
 /// A look as the stage picture, from the cache or rendered.
 async fn render(sh: &Shared, look: Look) -> Response {
-    let mut cache = sh.renders.lock().await;
-    if let Some((_, pic)) = cache.iter().find(|(l, _)| *l == look) {
-        return jpeg(pic.clone());
+    // The cache is held to look up and to insert, not across the render: pictures the
+    // page asks for at once (history, saved looks, members) render side by side.
+    let cached = {
+        let cache = sh.renders.lock().await;
+        cache
+            .iter()
+            .find(|(l, _)| *l == look)
+            .map(|(_, pic)| pic.clone())
+    };
+    if let Some(pic) = cached {
+        return jpeg(pic);
     }
     let engine = Arc::clone(&sh.engine);
     let rendered = look.clone();
@@ -639,7 +647,7 @@ async fn render(sh: &Shared, look: Look) -> Response {
         return refuse(StatusCode::INTERNAL_SERVER_ERROR, "the render failed");
     };
     let pic = Bytes::from(pic);
-    keep(&mut cache, look, &pic);
+    keep(&mut *sh.renders.lock().await, look, &pic);
     jpeg(pic)
 }
 
@@ -826,15 +834,23 @@ async fn reference_picture(sh: &Shared, name: String) -> Response {
         Ok(p) => p,
         Err(e) => return refuse(StatusCode::NOT_FOUND, &e),
     };
-    let meta = std::fs::metadata(&path).ok();
+    // Not the runtime's thread's time: the file system may be slow.
+    let meta = tokio::fs::metadata(&path).await.ok();
     let key: FileKey = (
         name.clone(),
         meta.as_ref().map_or(0, std::fs::Metadata::len),
         meta.and_then(|m| m.modified().ok()),
     );
-    let mut cache = sh.files.lock().await;
-    if let Some((_, pic)) = cache.iter().find(|(k, _)| *k == key) {
-        return jpeg(pic.clone());
+    // As `render`: the cache is held to look up and to insert, not across the decode.
+    let cached = {
+        let cache = sh.files.lock().await;
+        cache
+            .iter()
+            .find(|(k, _)| *k == key)
+            .map(|(_, pic)| pic.clone())
+    };
+    if let Some(pic) = cached {
+        return jpeg(pic);
     }
     let decoded = blocking(move || {
         visobjd_method::objective::decode_reference(&path).map(|img| {
@@ -852,7 +868,7 @@ async fn reference_picture(sh: &Shared, name: String) -> Response {
     match decoded {
         Some(Ok(pic)) => {
             let pic = Bytes::from(pic);
-            keep(&mut cache, key, &pic);
+            keep(&mut *sh.files.lock().await, key, &pic);
             jpeg(pic)
         }
         Some(Err(e)) => refuse(StatusCode::NOT_FOUND, &format!("{name} {e}")),
