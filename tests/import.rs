@@ -723,22 +723,20 @@ fn an_eos_console_and_its_csv_export_build_the_same_scene() {
         "--fixtures",
         s(&lib),
     ]));
-    let tcp_out = stdout(&run(&[
-        "import",
-        &console.url("eos"),
-        "--out",
-        s(&from_tcp),
-        "--fixtures",
-        s(&lib),
-    ]));
-    let slip_out = stdout(&run(&[
-        "import",
-        &slip.url("eos+slip"),
-        "--out",
-        s(&from_slip),
-        "--fixtures",
-        s(&lib),
-    ]));
+    let [tcp_out, slip_out] = [
+        (console.url("eos"), &from_tcp),
+        (slip.url("eos+slip"), &from_slip),
+    ]
+    .map(|(url, out)| {
+        stdout(&run(&[
+            "import",
+            &url,
+            "--out",
+            s(out),
+            "--fixtures",
+            s(&lib),
+        ]))
+    });
     let csv = scene_toml(&from_csv);
     assert_eq!(csv["name"].as_str(), Some("eos-patch"));
     assert_eq!(

@@ -247,19 +247,10 @@ fn the_layout_has_its_pages_and_their_controls() {
         );
     }
     // The demo's groups: exclusions, saturation and ratios, transfers; pins.
-    let demo = std::fs::read_to_string(
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/demo/scene.toml"),
-    )
-    .expect("the demo scene");
-    let first: String = demo
-        .split("[[group]]")
-        .nth(1)
-        .and_then(|g| {
-            g.lines()
-                .find_map(|l| l.strip_prefix("name = \"")?.strip_suffix('"'))
-        })
-        .expect("the demo's first group")
-        .to_string();
+    let demo =
+        visobjd_scene::Scene::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/demo"))
+            .expect("the demo scene");
+    let first = demo.groups[0].name.clone();
     assert_eq!(sends(&format!("/vo/group/{first}/exclude")).len(), 3);
     assert_eq!(sends(&format!("/vo/group/{first}/saturation")).len(), 1);
     assert!(
