@@ -617,8 +617,10 @@ impl Engine {
             ];
             pushes.extend(engine.feedback(&s));
             drop(s);
-            peer.reply(std::slice::from_ref(&reply));
+            // Subscribers first: whoever acts on the reply (a pick) has its pushes come
+            // after this gallery's, never before them.
             engine.notify(&pushes);
+            peer.reply(std::slice::from_ref(&reply));
             engine.poke_explorer();
         });
         if let Err(e) = spawned {
