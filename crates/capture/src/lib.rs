@@ -25,8 +25,8 @@ use visobjd_camera::{Camera, Shutter};
 use visobjd_compositor::basis::Precision;
 use visobjd_dmx::{Frame, Output, Patch};
 use visobjd_hdr::{BracketSettings, ExposureFit, MergeSettings, Radiance, Response};
-use visobjd_scene::emitter::colour::{ciede2000, linear_srgb_to_xyz, xyz_to_lab};
 use visobjd_scene::emitter::ColourModel;
+use visobjd_scene::emitter::colour::{ciede2000, linear_srgb_to_xyz, xyz_to_lab};
 use visobjd_scene::look::{Level, Look};
 use visobjd_scene::{MeasuredEmitter, Scene, SceneFile};
 
