@@ -375,6 +375,7 @@ fn state(e: &Engine) -> Value {
             let n = group.lights.len().max(1) as f32;
             json!({
                 "name": group.name,
+                "address": group.address(),
                 "lights": group.lights.iter().map(|&l| scene.lights[l].channel).collect::<Vec<_>>(),
                 "intensity": group.lights.iter().map(|&l| s.live.levels[l].intensity).sum::<f32>() / n,
                 "key": s.key_groups[g],

@@ -465,9 +465,10 @@ fn constraints_page(groups: &[String]) -> Node {
             16,
         ));
     }
-    for (i, g) in groups.iter().take(MAX_GROUPS).enumerate() {
+    for (i, name) in groups.iter().take(MAX_GROUPS).enumerate() {
         let y = 48 + i as i32 * 60;
-        c.push(label(&format!("group_{i}"), g, [16, y, 150, 52], 16));
+        c.push(label(&format!("group_{i}"), name, [16, y, 150, 52], 16));
+        let g = visobjd_scene::address_segment(name);
         for (j, mode) in ["ignore", "off", "none"].into_iter().enumerate() {
             c.extend(button(
                 &format!("exclude_{i}_{mode}"),

@@ -251,8 +251,20 @@ fn the_layout_has_its_pages_and_their_controls() {
         visobjd_scene::Scene::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/demo"))
             .expect("the demo scene");
     let first = demo.groups[0].name.clone();
-    assert_eq!(sends(&format!("/vo/group/{first}/exclude")).len(), 3);
-    assert_eq!(sends(&format!("/vo/group/{first}/saturation")).len(), 1);
+    assert!(first.contains(' '), "`{first}`: the case this checks");
+    // OSC 1.0 forbids spaces in an address: the layout writes them `_`.
+    let at = first.replace(' ', "_");
+    assert_eq!(sends(&format!("/vo/group/{at}/exclude")).len(), 3);
+    assert_eq!(sends(&format!("/vo/group/{at}/saturation")).len(), 1);
+    for m in &msgs {
+        assert!(
+            m.path
+                .chars()
+                .all(|c| c.is_ascii_graphic() && !"#*,?[]{}".contains(c)),
+            "`{}` is not an OSC 1.0 address",
+            m.path
+        );
+    }
     assert!(
         msgs.iter()
             .filter(|m| m.path.ends_with("/ratio"))

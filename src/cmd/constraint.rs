@@ -335,7 +335,7 @@ fn list(scene: &Scene, s: &Session) -> Vec<OscMessage> {
     };
     let r = &s.rules;
     for (g, group) in scene.groups.iter().enumerate() {
-        let at = |what: &str| format!("/vo/group/{}/{what}", group.name);
+        let at = |what: &str| format!("/vo/group/{}/{what}", group.address());
         if s.key_groups[g] {
             add(at("key"), vec![int(1)]);
         }

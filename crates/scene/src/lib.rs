@@ -174,10 +174,31 @@ pub struct Light {
 /// A light group ("system"): sampling assigns one value per group by default.
 #[derive(Debug, Clone)]
 pub struct Group {
-    /// Name as OSC addresses and the CLI use it.
+    /// Name as the CLI and OSC arguments use it (addresses use [`Group::address`]).
     pub name: String,
     /// Indices into [`Scene::lights`], ascending.
     pub lights: Vec<usize>,
+}
+
+impl Group {
+    /// The name as an OSC address segment: OSC 1.0 forbids spaces and `#*,/?[]{}` in an
+    /// address (and `/` splits it), so each is written `_`: group `front warm` is
+    /// `/vo/group/front_warm/level`. Matching is case-insensitive, as for names.
+    pub fn address(&self) -> String {
+        address_segment(&self.name)
+    }
+}
+
+/// `name` with OSC 1.0's forbidden address characters written `_` (see [`Group::address`]),
+/// for whoever writes addresses from names alone (the TouchOSC layout).
+pub fn address_segment(name: &str) -> String {
+    name.chars()
+        .map(|c| match c {
+            ' ' | '#' | '*' | ',' | '/' | '?' | '[' | ']' | '{' | '}' => '_',
+            c if c.is_ascii_control() => '_',
+            c => c,
+        })
+        .collect()
 }
 
 /// A validated scene description.
@@ -361,6 +382,19 @@ impl Scene {
         }
         // A declared group no light uses would be an empty sampling unit: drop it.
         groups.retain(|g| !g.lights.is_empty());
+        for (i, g) in groups.iter().enumerate() {
+            let address = g.address();
+            if let Some(other) = groups[..i]
+                .iter()
+                .find(|o| o.address().eq_ignore_ascii_case(&address))
+            {
+                return Err(invalid(format!(
+                    "groups `{}` and `{}` are both `{address}` in OSC addresses (spaces and \
+                     #*,/?[]{{}} are written _, case does not count): rename one",
+                    other.name, g.name
+                )));
+            }
+        }
         let mut remap = vec![usize::MAX; group_index.len()];
         for (new, g) in groups.iter().enumerate() {
             remap[lights[g.lights[0]].group] = new;
@@ -386,13 +420,24 @@ impl Scene {
             .ok()
     }
 
-    /// The group called `name` (exact match first, then case-insensitive, as OSC does).
+    /// The group called `name` (exact match first, then case-insensitive, then by its
+    /// address form, so `/vo/group/front_warm/...` finds `front warm`).
     pub fn group_index(&self, name: &str) -> Option<usize> {
-        self.groups.iter().position(|g| g.name == name).or_else(|| {
-            self.groups
-                .iter()
-                .position(|g| g.name.eq_ignore_ascii_case(name))
-        })
+        let groups = &self.groups;
+        groups
+            .iter()
+            .position(|g| g.name == name)
+            .or_else(|| {
+                groups
+                    .iter()
+                    .position(|g| g.name.eq_ignore_ascii_case(name))
+            })
+            .or_else(|| {
+                let address = address_segment(name);
+                groups
+                    .iter()
+                    .position(|g| g.address().eq_ignore_ascii_case(&address))
+            })
     }
 
     /// The profile of light `i`.
@@ -577,6 +622,45 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("unknown field `colour`"), "{e}");
+    }
+
+    #[test]
+    fn groups_are_found_by_their_address_form_and_must_not_share_one() {
+        let light = |ch: u32, group: &str| {
+            format!(
+                "[[group]]\nname = \"{group}\"\n[[light]]\nchannel = {ch}\nbasis = \"b.exr\"\nprofile = \"dimmer\"\nuniverse = 1\naddress = {ch}\ngroup = \"{group}\"\n"
+            )
+        };
+        let text = [
+            light(1, "Front warm"),
+            light(2, "cyc/top #2"),
+            light(3, "front"),
+        ]
+        .concat();
+        let scene = Scene::parse(Path::new("/s"), &text).expect("parses");
+        let addresses: Vec<String> = scene.groups.iter().map(Group::address).collect();
+        assert_eq!(addresses, ["Front_warm", "cyc_top__2", "front"]);
+        for (name, want) in [
+            ("Front warm", Some(0)),
+            ("front WARM", Some(0)),
+            ("front_warm", Some(0)),
+            ("CYC_TOP__2", Some(1)),
+            ("cyc/top #2", Some(1)),
+            ("front", Some(2)),
+            ("front_", None),
+            ("frontwarm", None),
+        ] {
+            assert_eq!(scene.group_index(name), want, "{name}");
+        }
+        let clash = [light(1, "front warm"), light(2, "Front_Warm")].concat();
+        let e = Scene::parse(Path::new("/s"), &clash)
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            e,
+            "/s/scene.toml: groups `front warm` and `Front_Warm` are both `Front_Warm` in OSC \
+             addresses (spaces and #*,/?[]{} are written _, case does not count): rename one"
+        );
     }
 
     #[test]
