@@ -309,3 +309,39 @@ fn receivers_see_the_configured_source() {
     assert_eq!((f.source_name.as_str(), f.priority), ("visobjd test", 100));
     assert!(!f.terminated);
 }
+
+#[test]
+fn pushes_keep_the_order_of_the_changes() {
+    // Two tablets move the master at the same moment, again and again: the last status a
+    // subscriber is pushed must be the state the daemon ends in, never the change that
+    // lost the race (a tablet would be left showing a stale value).
+    let mut d = Daemon::start("live-order");
+    let mut listen = d.client();
+    let port = i32::from(listen.port());
+    listen.call("/vo/subscribe", vec![int(port)], "/vo/subscribed");
+    listen.fence();
+    let (mut a, mut b) = (d.client(), d.client());
+    for round in 0..400 {
+        let (va, vb) = (
+            f64::from(round % 97) / 100.0,
+            0.99 - f64::from(round % 89) / 100.0,
+        );
+        std::thread::scope(|s| {
+            s.spawn(|| a.ok("/vo/master", vec![float(va as f32)], "/vo/master"));
+            s.spawn(|| b.ok("/vo/master", vec![float(vb as f32)], "/vo/master"));
+        });
+        // Both replies are in, so both changes' pushes were sent: the fence sees them.
+        let pushed = listen.fence();
+        let last = pushed
+            .iter()
+            .rev()
+            .find(|m| m.addr == "/vo/status")
+            .unwrap_or_else(|| panic!("round {round}: no status pushed: {pushed:?}"));
+        let now = d.status().master;
+        let shown = common::daemon::Status::parse(last).master;
+        assert!(
+            close(shown, now),
+            "round {round}: the master is {now} but the last push says {shown} ({va} and {vb} sent at once)"
+        );
+    }
+}

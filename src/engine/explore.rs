@@ -207,8 +207,7 @@ impl Engine {
                 self.flush_explored();
                 last_backup = Instant::now();
             }
-            drop(s);
-            self.notify(&pushes);
+            self.publish(s, &pushes);
         }
     }
 

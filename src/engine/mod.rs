@@ -214,8 +214,7 @@ impl Engine {
         }
         let ticket = (outcome.persist != Persist::No)
             .then(|| self.writer.save(Snapshot::of(&self.stage.scene, &s)));
-        drop(s);
-        self.notify(&pushes);
+        self.publish(s, &pushes);
         if let Some(ticket) = ticket.filter(|_| outcome.persist == Persist::Now) {
             self.writer.wait(ticket).map_err(|e| {
                 format!(
@@ -245,8 +244,7 @@ impl Engine {
         let mut s = self.session();
         s.looks = looks;
         self.forward_pending();
-        drop(s);
-        self.notify(&[]);
+        self.publish(s, &[]);
         Ok(out)
     }
 
@@ -843,11 +841,24 @@ impl Engine {
     /// Pushes messages to every live subscriber (expired or unreachable ones are dropped)
     /// and to the web pages' event streams.
     pub fn notify(&self, msgs: &[OscMessage]) {
+        let subs = self.subscribers.lock().unwrap_or_else(|p| p.into_inner());
+        self.push_all(subs, msgs);
+    }
+
+    /// Releases the session, then pushes `msgs` as [`Engine::notify`] does, in the order the
+    /// session changed: the pushes' lock is taken before the session's is let go, so two
+    /// changes' pushes never cross (a tablet would be left showing the older state).
+    fn publish(&self, s: MutexGuard<'_, Session>, msgs: &[OscMessage]) {
+        let subs = self.subscribers.lock().unwrap_or_else(|p| p.into_inner());
+        drop(s);
+        self.push_all(subs, msgs);
+    }
+
+    fn push_all(&self, mut subs: MutexGuard<'_, Vec<Subscriber>>, msgs: &[OscMessage]) {
         // No page listening is no error (and then no copy of the batch is made).
         if self.changes.receiver_count() > 0 {
             let _ = self.changes.send(msgs.into());
         }
-        let mut subs = self.subscribers.lock().unwrap_or_else(|p| p.into_inner());
         subs.retain(|s| {
             s.last_seen.elapsed() < SUBSCRIPTION
                 && match self.push_to(s.to, msgs) {

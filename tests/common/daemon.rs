@@ -300,7 +300,7 @@ impl Health {
 }
 
 impl Status {
-    fn parse(m: &OscMessage) -> Status {
+    pub fn parse(m: &OscMessage) -> Status {
         let a = &m.args;
         Health::parse(m);
         Status {
