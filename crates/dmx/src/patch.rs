@@ -101,17 +101,7 @@ impl Patch {
             for &slot in &profile.slots {
                 let rule = match slot {
                     Slot::Intensity | Slot::Intensity16 => Rule::Scale,
-                    Slot::Red
-                    | Slot::Green
-                    | Slot::Blue
-                    | Slot::White
-                    | Slot::Amber
-                    | Slot::Lime
-                    | Slot::Emitter(_)
-                        if !has_intensity =>
-                    {
-                        Rule::Scale
-                    }
+                    emitter if emitter.is_emitter() && !has_intensity => Rule::Scale,
                     Slot::Cyan | Slot::Magenta | Slot::Yellow if !has_intensity => Rule::Complement,
                     _ => Rule::Keep,
                 };
