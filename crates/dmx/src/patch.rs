@@ -39,6 +39,28 @@ struct Placed {
     colour: ColourModel,
 }
 
+impl Placed {
+    /// Writes this light's slots into `frame`: `value(slot, k)` per slot in order, `k` the
+    /// slot's place among the light's additive emitters (`None` for other slots); `None`
+    /// leaves the slot as it is. Slots past the universe's end are dropped.
+    fn write(&self, frame: &mut Frame, mut value: impl FnMut(Slot, Option<usize>) -> Option<f32>) {
+        let base = self.universe * SLOTS;
+        let (mut at, mut emitters) = (self.offset, 0);
+        for &slot in &self.slots {
+            let k = slot.is_emitter().then(|| {
+                emitters += 1;
+                emitters - 1
+            });
+            if let Some(v) = value(slot, k)
+                && at < SLOTS
+            {
+                frame.levels[base + at] = v;
+            }
+            at += slot.width();
+        }
+    }
+}
+
 /// The scene's DMX patch: which universes exist and where every light's slots are.
 #[derive(Debug, Clone)]
 pub struct Patch {
@@ -170,27 +192,19 @@ impl Patch {
             }
             .multiplier()
             .map(unit);
-            let base = light.universe * SLOTS;
-            let (mut at, mut emitter) = (light.offset, 0);
-            for &slot in &light.slots {
-                let v = if slot.is_emitter() {
-                    emitter += 1;
-                    emitters.get(emitter - 1).map_or(0.0, |&v| v as f32)
-                } else {
-                    match slot {
+            light.write(&mut frame, |slot, emitter| {
+                Some(unit(match emitter {
+                    Some(k) => emitters.get(k).map_or(0.0, |&v| v as f32),
+                    None => match slot {
                         Slot::Intensity | Slot::Intensity16 => intensity,
                         Slot::Cyan => 1.0 - flags[0],
                         Slot::Magenta => 1.0 - flags[1],
                         Slot::Yellow => 1.0 - flags[2],
                         Slot::Fixed(n) => f32::from(n) / 255.0,
                         _ => 0.0,
-                    }
-                };
-                if at < SLOTS {
-                    frame.levels[base + at] = unit(v);
-                }
-                at += slot.width();
-            }
+                    },
+                }))
+            });
         }
         frame
     }
@@ -201,22 +215,10 @@ impl Patch {
     pub fn emitter_alone(&self, look: &Look, light: usize, emitter: usize) -> Frame {
         let mut frame = self.unmastered(look);
         if let Some(placed) = self.lights.get(light) {
-            let base = placed.universe * SLOTS;
-            let (mut at, mut k) = (placed.offset, 0);
-            for &slot in &placed.slots {
-                let v = if slot.is_emitter() {
-                    k += 1;
-                    Some(if k - 1 == emitter { 1.0 } else { 0.0 })
-                } else {
-                    matches!(slot, Slot::Intensity | Slot::Intensity16).then_some(1.0)
-                };
-                if let Some(v) = v
-                    && at < SLOTS
-                {
-                    frame.levels[base + at] = v;
-                }
-                at += slot.width();
-            }
+            placed.write(&mut frame, |slot, k| match k {
+                Some(k) => Some(if k == emitter { 1.0 } else { 0.0 }),
+                None => matches!(slot, Slot::Intensity | Slot::Intensity16).then_some(1.0),
+            });
         }
         frame
     }
