@@ -3,6 +3,8 @@
 //! Both are read straight off the basis images (the composite is linear), at a small
 //! working resolution, once per light at load; a region query is then a pixel count.
 
+use std::ops::Range;
+
 use rayon::prelude::*;
 
 use crate::objective::Region;
@@ -15,43 +17,66 @@ const BRIGHT_FRACTION: f64 = 0.15;
 /// A light's highlight pixels: its top 5%.
 const HIGHLIGHT_FRACTION: f64 = 0.05;
 
-/// Per-light luminance at the working resolution, with its bright/highlight thresholds.
+/// Per-light luminance at the working resolution, and where each light's bright and
+/// highlight pixels are.
 #[derive(Debug, Clone)]
 pub struct Footprints {
     width: usize,
     height: usize,
     /// `luma[l * pixels + p]`.
     luma: Vec<f32>,
-    /// Per light: luminance at or above which a pixel is bright / a highlight; `INFINITY`
-    /// for a light that lights nothing.
-    bright: Vec<f32>,
-    highlight: Vec<f32>,
+    lights: usize,
+    /// Per light, summed-area tables of its bright and highlight pixels: at each corner of
+    /// the pixel grid (`(width + 1) * (height + 1)` per light, row by row) how many lie above
+    /// and left of it. A region's counts are then four lookups per light whatever its
+    /// size: a drag asks for a selection 60 times a second.
+    counts: Vec<[u32; 2]>,
 }
 
 impl Footprints {
     /// Analyses basis images (ideally already at [`WORKING_WIDTH`]).
     pub fn new(basis: &BasisImages) -> Footprints {
         let mut luma = Vec::with_capacity(basis.lights * basis.pixels());
-        let mut bright = Vec::with_capacity(basis.lights);
-        let mut highlight = Vec::with_capacity(basis.lights);
         for l in 0..basis.lights {
-            let lum = basis.luminance(l);
-            let mut lit: Vec<f32> = lum.iter().copied().filter(|&v| v > 0.0).collect();
-            bright.push(top_threshold(&mut lit, BRIGHT_FRACTION));
-            highlight.push(top_threshold(&mut lit, HIGHLIGHT_FRACTION));
-            luma.extend(lum);
+            luma.extend(basis.luminance(l));
+        }
+        Footprints::of_luma(basis.width, basis.height, luma)
+    }
+
+    /// The footprints of per-light luminance images `luma` (`width x height` each, light
+    /// after light).
+    fn of_luma(width: usize, height: usize, luma: Vec<f32>) -> Footprints {
+        let pixels = width * height;
+        let lights = luma.len().checked_div(pixels).unwrap_or(0);
+        let stride = width + 1;
+        let corners = stride * (height + 1);
+        let mut counts = vec![[0u32; 2]; lights * corners];
+        for l in 0..lights {
+            let lum = &luma[l * pixels..(l + 1) * pixels];
+            let [b, h] = thresholds(lum);
+            let table = &mut counts[l * corners..(l + 1) * corners];
+            for y in 0..height {
+                let mut row = [0u32; 2];
+                for x in 0..width {
+                    let v = lum[y * width + x];
+                    row[0] += u32::from(v > 0.0 && v >= b);
+                    row[1] += u32::from(v > 0.0 && v >= h);
+                    let above = table[y * stride + x + 1];
+                    table[(y + 1) * stride + x + 1] = [above[0] + row[0], above[1] + row[1]];
+                }
+            }
         }
         Footprints {
-            width: basis.width,
-            height: basis.height,
+            width,
+            height,
             luma,
-            bright,
-            highlight,
+            lights,
+            counts,
         }
     }
 
     fn lights(&self) -> usize {
-        self.bright.len()
+        self.lights
     }
 
     fn light(&self, l: usize) -> &[f32] {
@@ -59,12 +84,15 @@ impl Footprints {
         &self.luma[l * n..(l + 1) * n]
     }
 
-    fn inside(&self, region: Region) -> Vec<bool> {
-        let (w, h) = (self.width, self.height);
-        let (xs, ys) = region.pixel_spans(w, h);
-        (0..w * h)
-            .map(|p| xs.contains(&(p % w)) && ys.contains(&(p / w)))
-            .collect()
+    /// Light `l`'s bright and highlight pixels inside the pixel rectangle `xs x ys`.
+    fn count(&self, l: usize, xs: &Range<usize>, ys: &Range<usize>) -> [u32; 2] {
+        let stride = self.width + 1;
+        let corners = stride * (self.height + 1);
+        let table = &self.counts[l * corners..(l + 1) * corners];
+        let at = |x: usize, y: usize| table[y * stride + x];
+        let (a, b) = (at(xs.start, ys.start), at(xs.end, ys.start));
+        let (c, d) = (at(xs.start, ys.end), at(xs.end, ys.end));
+        [0, 1].map(|k| d[k] + a[k] - b[k] - c[k])
     }
 
     /// The lights a region selects: any of the paper's three heuristics holds. The whole
@@ -73,24 +101,16 @@ impl Footprints {
         if region.is_full() {
             return vec![true; self.lights()];
         }
-        let inside = self.inside(region);
-        let area = inside.iter().filter(|&&v| v).count().max(1) as f64;
+        let (xs, ys) = region.pixel_spans(self.width, self.height);
+        let area = (xs.len() * ys.len()).max(1) as f64;
+        let all = (0..self.width, 0..self.height);
         (0..self.lights())
             .map(|l| {
-                let (mut bright_in, mut bright_all, mut high_in, mut high_all) = (0, 0, 0, 0);
-                for (&v, &ins) in self.light(l).iter().zip(&inside) {
-                    if v > 0.0 && v >= self.bright[l] {
-                        bright_all += 1;
-                        bright_in += usize::from(ins);
-                    }
-                    if v > 0.0 && v >= self.highlight[l] {
-                        high_all += 1;
-                        high_in += usize::from(ins);
-                    }
-                }
-                let covers = bright_in as f64 / area > 0.25;
-                let contained = bright_all > 0 && bright_in as f64 / bright_all as f64 > 0.5;
-                let highlights = high_all > 0 && high_in as f64 / high_all as f64 > 0.05;
+                let [bright_in, high_in] = self.count(l, &xs, &ys).map(f64::from);
+                let [bright_all, high_all] = self.count(l, &all.0, &all.1).map(f64::from);
+                let covers = bright_in / area > 0.25;
+                let contained = bright_all > 0.0 && bright_in / bright_all > 0.5;
+                let highlights = high_all > 0.0 && high_in / high_all > 0.05;
                 covers || contained || highlights
             })
             .collect()
@@ -129,6 +149,14 @@ fn lane_sum(v: &[f32]) -> f32 {
     lanes.iter().sum::<f32>() + rest.iter().sum::<f32>()
 }
 
+/// The luminance at or above which a pixel of a light's image `lum` is bright, and a
+/// highlight: its top [`BRIGHT_FRACTION`] and [`HIGHLIGHT_FRACTION`] among the pixels it
+/// lights (`INFINITY` for a light that lights nothing).
+fn thresholds(lum: &[f32]) -> [f32; 2] {
+    let mut lit: Vec<f32> = lum.iter().copied().filter(|&v| v > 0.0).collect();
+    [BRIGHT_FRACTION, HIGHLIGHT_FRACTION].map(|f| top_threshold(&mut lit, f))
+}
+
 /// The value at or above which the top `fraction` of `values` lie (`INFINITY` if empty).
 fn top_threshold(values: &mut [f32], fraction: f64) -> f32 {
     if values.is_empty() {
@@ -138,4 +166,79 @@ fn top_threshold(values: &mut [f32], fraction: f64) -> f32 {
     let k = ((fraction * n as f64).ceil() as usize).clamp(1, n);
     let (_, kth, _) = values.select_nth_unstable_by(n - k, |a, b| a.total_cmp(b));
     *kth
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{RngExt, SeedableRng};
+
+    /// The selection as the paper states it, pixel by pixel.
+    fn select_by_pixels(f: &Footprints, region: Region) -> Vec<bool> {
+        let (w, h) = (f.width, f.height);
+        let (xs, ys) = region.pixel_spans(w, h);
+        let inside: Vec<bool> = (0..w * h)
+            .map(|p| xs.contains(&(p % w)) && ys.contains(&(p / w)))
+            .collect();
+        let area = inside.iter().filter(|&&v| v).count().max(1) as f64;
+        (0..f.lights())
+            .map(|l| {
+                let [bright, highlight] = thresholds(f.light(l));
+                let (mut bright_in, mut bright_all, mut high_in, mut high_all) = (0, 0, 0, 0);
+                for (&v, &ins) in f.light(l).iter().zip(&inside) {
+                    if v > 0.0 && v >= bright {
+                        bright_all += 1;
+                        bright_in += usize::from(ins);
+                    }
+                    if v > 0.0 && v >= highlight {
+                        high_all += 1;
+                        high_in += usize::from(ins);
+                    }
+                }
+                let covers = bright_in as f64 / area > 0.25;
+                let contained = bright_all > 0 && bright_in as f64 / bright_all as f64 > 0.5;
+                let highlights = high_all > 0 && high_in as f64 / high_all as f64 > 0.05;
+                covers || contained || highlights
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_tables_select_what_the_pixels_do() {
+        let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(7);
+        let (w, h, lights) = (37, 23, 40);
+        // Each light a soft spot somewhere (some off stage, one dark), as basis images are.
+        let mut luma = Vec::new();
+        for l in 0..lights {
+            let (cx, cy) = (
+                rng.random_range(-5.0..42.0f32),
+                rng.random_range(-5.0..28.0f32),
+            );
+            let r = rng.random_range(2.0..15.0f32);
+            for y in 0..h {
+                for x in 0..w {
+                    let d2 = (x as f32 - cx).powi(2) + (y as f32 - cy).powi(2);
+                    luma.push(if l == 3 {
+                        0.0
+                    } else {
+                        (1.0 - d2 / (r * r)).max(0.0)
+                    });
+                }
+            }
+        }
+        let f = Footprints::of_luma(w, h, luma);
+        let mut picked = 0;
+        for _ in 0..500 {
+            let (x0, y0) = (rng.random_range(0.0..1.0f32), rng.random_range(0.0..1.0f32));
+            let (x1, y1) = (rng.random_range(x0..=1.0f32), rng.random_range(y0..=1.0f32));
+            let Ok(region) = Region::new(x0, y0, x1, y1) else {
+                continue;
+            };
+            let want = select_by_pixels(&f, region);
+            assert_eq!(f.select(region), want, "{region:?}");
+            picked += want.iter().filter(|&&on| on).count();
+        }
+        // Regions select some lights and leave others: the comparison is not all-false.
+        assert!(picked > 500 && picked < 500 * lights, "{picked}");
+    }
 }
