@@ -162,11 +162,29 @@ fn libc_sigabrt() -> i32 {
 fn a_generate_that_panics_is_answered_and_the_next_one_works() {
     let mut d = start("booth-generate-panic", &[]);
     d.add_objective("warm.png", "both");
+    let mut tablet = d.client();
+    let mut listen = d.client();
+    let port = i32::from(listen.port());
+    tablet.call("/vo/subscribe", vec![int(port)], "/vo/subscribed");
+    listen.fence(); // the state pushed at subscription
     d.ok("/vo/test/panic", vec![string("generate")], "/vo/test");
     let got = d.call("/vo/generate", vec![], "/vo/generated");
     let last = got.last().expect("a reply");
     assert_eq!(last.addr, "/vo/error", "{got:?}");
     assert_eq!(common::daemon::text(&last.args[0]), "/vo/generate");
+    // Subscribers' progress bars end, and their status line stops saying it generates
+    // (pushed before the requester is answered).
+    let pushed = listen.fence();
+    let progress: Vec<f64> = pushed
+        .iter()
+        .filter(|m| m.addr == "/vo/progress")
+        .map(|m| common::daemon::num(&m.args[0]))
+        .collect();
+    assert_eq!(progress.first(), Some(&0.0), "{pushed:?}");
+    assert_eq!(progress.last(), Some(&1.0), "{pushed:?}");
+    let line = pushed.iter().rev().find(|m| m.addr == "/vo/status/text");
+    let line = common::daemon::text(&line.expect("a status line").args[0]);
+    assert!(!line.contains("generating"), "{line}");
     let g = d.generate();
     assert!(common::daemon::num(&g.args[1]) >= 1.0, "{g:?}");
     d.ok("/vo/pick", vec![int(1)], "/vo/picked");

@@ -4,7 +4,8 @@
 mod common;
 
 use common::daemon::{
-    CLUSTERS, COUNT, Daemon, Light, Osc, STAGE, fixture, float, int, num, same_look, string, text,
+    CLUSTERS, COUNT, Daemon, GENERATE_PATIENCE, Light, Osc, STAGE, Udp, fixture, float, int, num,
+    same_look, string, text,
 };
 
 /// A daemon with one objective and a generated gallery; returns it with the entry sizes.
@@ -60,6 +61,73 @@ fn generate_fills_the_gallery() {
     // Generating does not change the stage.
     assert!(d.live().iter().all(|l| l.intensity == 0.0));
     d.refused("/vo/generatee", vec![]);
+}
+
+/// The `/vo/progress` values `listen` is pushed up to and including `/vo/generated` (the
+/// generate's reply), checked as docs/osc.md says: 0 first, 1 last, never falling, at most
+/// nine between; nothing about progress comes after `/vo/generated`.
+fn pushed_progress(listen: &mut Udp) -> Vec<f64> {
+    let pushed = listen.collect("/vo/generated", GENERATE_PATIENCE, "a generate's pushes");
+    assert_eq!(
+        pushed.last().expect("pushes").addr,
+        "/vo/generated",
+        "{pushed:?}"
+    );
+    let progress: Vec<f64> = pushed
+        .iter()
+        .filter(|m| m.addr == "/vo/progress")
+        .map(|m| {
+            assert_eq!(m.args.len(), 1, "{m:?}");
+            num(&m.args[0])
+        })
+        .collect();
+    assert_eq!(progress.first(), Some(&0.0), "{progress:?}");
+    assert_eq!(progress.last(), Some(&1.0), "{progress:?}");
+    assert!(
+        progress.windows(2).all(|w| w[0] <= w[1]),
+        "progress fell: {progress:?}"
+    );
+    assert!(
+        progress.len() <= 11,
+        "more than a push a tenth: {progress:?}"
+    );
+    let late = listen.fence();
+    assert!(
+        late.iter().all(|m| m.addr != "/vo/progress"),
+        "progress after /vo/generated: {late:?}"
+    );
+    progress
+}
+
+#[test]
+fn a_generate_pushes_its_progress_as_it_goes() {
+    let mut d = Daemon::start("gal-progress");
+    d.add_objective("warm.png", "both");
+    // A thousand candidates: docs/osc.md's largest count, many batches of draws.
+    d.ok("/vo/generate/count", vec![int(1000)], "/vo/generate/count");
+    let mut tablet = d.client();
+    let mut listen = d.client();
+    let port = i32::from(listen.port());
+    tablet.call("/vo/subscribe", vec![int(port)], "/vo/subscribed");
+    listen.fence(); // the state pushed at subscription
+
+    let seeded = |d: &mut Daemon| {
+        d.send("/vo/generate/seeded", vec![int(77)]);
+        let got = d.collect("/vo/generated", GENERATE_PATIENCE, "/vo/generate/seeded 77");
+        let r = got.last().expect("a reply");
+        assert_eq!(r.addr, "/vo/generated", "{got:?}");
+        assert_eq!(num(&r.args[3]) as i32, 77, "{r:?}");
+    };
+    seeded(&mut d);
+    let progress = pushed_progress(&mut listen);
+    let inside = progress.iter().filter(|&&f| f > 0.0 && f < 1.0).count();
+    assert!(inside >= 3, "{inside} values between 0 and 1: {progress:?}");
+    // Counted in work done, not time: the same seed pushes the same values.
+    seeded(&mut d);
+    assert_eq!(pushed_progress(&mut listen), progress);
+    // A plain generate too, whatever its seed.
+    d.generate();
+    pushed_progress(&mut listen);
 }
 
 #[test]

@@ -179,7 +179,9 @@ impl Engine {
             let Some((inputs, serial)) = self.take_regions(&regions) else {
                 continue;
             };
-            let Some((generation, ms)) = self.draw(&inputs, seed, serial) else {
+            // No progress: a gallery a drag draws is over in a few milliseconds, up to 50
+            // a second.
+            let Some((generation, ms)) = self.draw(&inputs, seed, serial, |_| {}) else {
                 drop(running);
                 continue;
             };

@@ -574,7 +574,7 @@ impl Engine {
         // Seeds travel as OSC int32: a random one stays in 1..=i32::MAX so it can be replayed.
         let seed = seed.unwrap_or_else(|| s.next_seed());
         let serial = self.generates.fetch_add(1, Ordering::SeqCst) + 1;
-        let mut started_msgs = vec![msg("/vo/progress", vec![OscType::Float(0.0)])];
+        let mut started_msgs = vec![progress(0.0)];
         started_msgs.extend(self.feedback(&s));
         drop(s);
         let engine = Arc::clone(self);
@@ -583,7 +583,13 @@ impl Engine {
             // Whatever happens below, the next generate is allowed.
             let running = Running(&engine.generating);
             engine.notify(&started_msgs);
-            let Some((generation, ms)) = engine.draw(&inputs, seed, serial) else {
+            let mut tenths = Tenths::default();
+            let drawn = engine.draw(&inputs, seed, serial, |f| {
+                if tenths.crossed(f) {
+                    engine.notify(&[progress(f)]);
+                }
+            });
+            let Some((generation, ms)) = drawn else {
                 let why = format!(
                     "the generate failed (an internal error, logged with seed {seed}); \
                          the gallery is unchanged, generate again"
@@ -591,6 +597,10 @@ impl Engine {
                 let e = error("/vo/generate", &why);
                 // Free before the answer: the requester may generate again at once.
                 drop(running);
+                // The bar ends and the status line stops saying "generating...".
+                let mut pushes = vec![progress(1.0)];
+                pushes.extend(engine.feedback(&engine.session()));
+                engine.notify(&pushes);
                 engine.poke_explorer();
                 peer.reply(std::slice::from_ref(&e));
                 return;
@@ -609,10 +619,7 @@ impl Engine {
             });
             s.entry = None;
             engine.generating.store(false, Ordering::SeqCst);
-            let mut pushes = vec![
-                msg("/vo/progress", vec![OscType::Float(1.0)]),
-                reply.clone(),
-            ];
+            let mut pushes = vec![progress(1.0), reply.clone()];
             pushes.extend(engine.feedback(&s));
             drop(s);
             // Subscribers first: whoever acts on the reply (a pick) has its pushes come
@@ -630,8 +637,16 @@ impl Engine {
 
     /// Draws a gallery from `inputs` with `seed` on the compute pool (whose threads run at
     /// a lower priority, so the DMX clock and the OSC threads get a core the moment they
-    /// wake), with the time it took in ms. `None` when it panicked (logged).
-    fn draw(&self, inputs: &Inputs, seed: u64, serial: u64) -> Option<(Generation, f32)> {
+    /// wake), with the time it took in ms. `None` when it panicked (logged). `progress` is
+    /// told the share done as it goes, on the drawing's thread
+    /// ([`Stage::generate_with_progress`]): it must not wait on anything.
+    fn draw(
+        &self,
+        inputs: &Inputs,
+        seed: u64,
+        serial: u64,
+        progress: impl FnMut(f32) + Send,
+    ) -> Option<(Generation, f32)> {
         let started = Instant::now();
         let drawn = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
             if self.panic_generate.swap(false, Ordering::SeqCst) {
@@ -640,7 +655,7 @@ impl Engine {
             // `scope` runs its body on a pool thread: the sampling and clustering between
             // the parallel parts are niced too, not run on this thread.
             rayon::scope(|_| {
-                self.stage.generate(
+                self.stage.generate_with_progress(
                     &GenerateRequest {
                         objectives: &inputs.objectives,
                         constraints: &inputs.constraints,
@@ -650,6 +665,7 @@ impl Engine {
                         clusters: inputs.clusters,
                     },
                     &mut rand::rngs::Xoshiro256PlusPlus::seed_from_u64(seed),
+                    progress,
                 )
             })
         }));
@@ -991,6 +1007,31 @@ fn generated(generation: &Generation, ms: f32, seed: u64) -> OscMessage {
     )
 }
 
+/// `/vo/progress fraction`: how far the running generate is (docs/osc.md).
+fn progress(fraction: f32) -> OscMessage {
+    msg("/vo/progress", vec![OscType::Float(fraction)])
+}
+
+/// Which of a generate's progress reports are pushed: the first to reach each next tenth,
+/// so a generate pushes at most nine values between its 0 and its 1 however many batches
+/// it draws (a tablet and the page need no more, and a 1000-candidate generate draws
+/// dozens).
+#[derive(Debug, Default)]
+struct Tenths {
+    /// Tenths passed so far.
+    passed: u8,
+}
+
+impl Tenths {
+    /// Whether `fraction` (0..1) reaches a tenth not reached before.
+    fn crossed(&mut self, fraction: f32) -> bool {
+        let tenth = (fraction * 10.0).clamp(0.0, 9.0) as u8;
+        let crossed = tenth > self.passed;
+        self.passed = self.passed.max(tenth);
+        crossed
+    }
+}
+
 /// Why a generate (or an explore) cannot start without objectives.
 const NO_OBJECTIVES: &str = "there are no objectives: add one with /vo/objective/add first";
 
@@ -1083,4 +1124,23 @@ pub fn gallery_look(s: &Session, k: usize, m: usize) -> Result<Look, String> {
             g.generation.entries[k - 1].len()
         )
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Tenths;
+
+    #[test]
+    fn progress_is_pushed_once_a_tenth() {
+        let mut tenths = Tenths::default();
+        let reports = [0.0, 0.05, 0.12, 0.13, 0.31, 0.35, 0.5, 0.99, 0.995];
+        let pushed: Vec<f32> = reports.into_iter().filter(|&f| tenths.crossed(f)).collect();
+        assert_eq!(pushed, [0.12, 0.31, 0.5, 0.99]);
+        // However many reports, at most nine pushes between 0 and 1.
+        let mut tenths = Tenths::default();
+        let n = (0..10_000)
+            .filter(|&i| tenths.crossed(i as f32 / 10_000.0))
+            .count();
+        assert_eq!(n, 9);
+    }
 }

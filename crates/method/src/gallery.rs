@@ -254,6 +254,13 @@ pub struct Size {
 /// candidates accepted), so their thumbnails can be rendered while the remaining candidates
 /// are still being decided: a 44-light generate takes about 5-10% less time. If fewer
 /// entries form, `reps` runs at the end.
+///
+/// `progress` is told how much of the drawing is done (0..=1), from work done, never from a
+/// clock, so a seed and inputs give the same sequence every time: before each batch is
+/// drawn, the larger of the share of candidates accepted and the share of draws allowed
+/// used, and 1 once the drawing ends (`reps` may still be running then). It is called on
+/// whichever thread draws, never concurrently, at most once a batch.
+#[allow(clippy::too_many_arguments)]
 pub fn generate<T: Send>(
     plan: &Plan,
     base: &Look,
@@ -262,6 +269,7 @@ pub fn generate<T: Send>(
     size: Size,
     rng: &mut (impl Rng + Send),
     reps: impl FnOnce(&[&Look]) -> T + Send,
+    progress: &mut (dyn FnMut(f32) + Send),
 ) -> (Generation, T) {
     let mut drawing = Drawing {
         plan,
@@ -275,6 +283,7 @@ pub fn generate<T: Send>(
         draws: 0,
         batch: Batch::default(),
         rng,
+        progress,
     };
     let clusters = drawing.clustering.clusters;
     while drawing.clustering.entries.len() < clusters && drawing.decide_next() {}
@@ -286,7 +295,10 @@ pub fn generate<T: Send>(
         .collect();
     let (out, ()) = rayon::join(
         || reps(&chosen.iter().collect::<Vec<_>>()),
-        || while drawing.decide_next() {},
+        || {
+            while drawing.decide_next() {}
+            (drawing.progress)(1.0);
+        },
     );
     let Drawing {
         clustering,
@@ -319,6 +331,7 @@ struct Drawing<'a, R> {
     draws: usize,
     batch: Batch,
     rng: &'a mut R,
+    progress: &'a mut (dyn FnMut(f32) + Send),
 }
 
 /// The batch being decided: its looks not yet decided, and every look's Lab proxy and
@@ -367,9 +380,19 @@ impl<R: Rng> Drawing<'_, R> {
         true
     }
 
+    /// How much of the drawing is done: the share of the candidates accepted or of the
+    /// draws allowed, whichever is further (a generate ends at either bound).
+    fn done(&self) -> f32 {
+        let accepted = self.candidates.len() as f32 / self.count.max(1) as f32;
+        let drawn = self.draws as f32 / self.max_draws.max(1) as f32;
+        accepted.max(drawn).min(1.0)
+    }
+
     /// Samples the next batch, renders its Lab proxies and measures its distances to every
-    /// representative that exists now, in parallel.
+    /// representative that exists now, in parallel; reports the work done before it.
     fn draw_batch(&mut self) {
+        let done = self.done();
+        (self.progress)(done);
         let want = (self.count - self.candidates.len())
             .clamp(1, BATCH)
             .min(self.max_draws - self.draws);
