@@ -598,9 +598,10 @@ impl Engine {
                 // Free before the answer: the requester may generate again at once.
                 drop(running);
                 // The bar ends and the status line stops saying "generating...".
+                let s = engine.session();
                 let mut pushes = vec![progress(1.0)];
-                pushes.extend(engine.feedback(&engine.session()));
-                engine.notify(&pushes);
+                pushes.extend(engine.feedback(&s));
+                engine.publish(s, &pushes);
                 engine.poke_explorer();
                 peer.reply(std::slice::from_ref(&e));
                 return;
@@ -621,10 +622,9 @@ impl Engine {
             engine.generating.store(false, Ordering::SeqCst);
             let mut pushes = vec![progress(1.0), reply.clone()];
             pushes.extend(engine.feedback(&s));
-            drop(s);
             // Subscribers first: whoever acts on the reply (a pick) has its pushes come
             // after this gallery's, never before them.
-            engine.notify(&pushes);
+            engine.publish(s, &pushes);
             peer.reply(std::slice::from_ref(&reply));
             engine.poke_explorer();
         });
