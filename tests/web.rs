@@ -2,7 +2,10 @@
 //! allow-list, the password, cross-origin and hostile uploads), and in headless Chromium
 //! driven through the DevTools protocol: a whole designer's session (upload and add
 //! references, draw a region, generate, members, transfer, pick, undo, save, recall), each
-//! step checked on the page, in a screenshot, and on the wire.
+//! step checked on the page, in a screenshot, and on the wire; and the constraints of
+//! groups and lights, a pin and a transfer region drawn on the stage, and a history tap
+//! of several steps as one command, read back from the daemon and checked on the wire,
+//! the page shown at a laptop's and a tablet's width.
 
 mod common;
 
