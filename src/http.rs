@@ -32,8 +32,10 @@ use tokio::net::TcpListener;
 use tokio::sync::{Mutex, Semaphore};
 
 use crate::config::{Cidr, permits};
+use crate::engine::rules::Exclude;
 use crate::engine::{Engine, EngineHandler};
 use crate::osc::{Handler, Peer};
+use visobjd_method::constrain::Saturation;
 use visobjd_scene::look::Look;
 
 /// Largest request head (request line and headers); hyper answers 431 beyond it.
@@ -350,13 +352,14 @@ fn state(e: &Engine) -> Value {
     let scene = &e.stage.scene;
     let s = e.session();
     let (undo, redo, _) = s.history();
+    let rules = &s.rules;
     let lights: Vec<Value> = scene
         .lights
         .iter()
         .enumerate()
         .map(|(i, l)| {
             let lv = s.live.levels[i];
-            json!({
+            let mut light = json!({
                 "ch": l.channel,
                 "name": l.name,
                 "group": scene.groups[l.group].name,
@@ -364,7 +367,14 @@ fn state(e: &Engine) -> Value {
                 "intensity": lv.intensity,
                 "color": lv.color,
                 "lock": s.locked_lights[i],
-            })
+            });
+            rules_json(
+                &mut light,
+                None,
+                rules.light_saturation[i],
+                rules.light_exclude[i],
+            );
+            light
         })
         .collect();
     let groups: Vec<Value> = scene
@@ -373,13 +383,34 @@ fn state(e: &Engine) -> Value {
         .enumerate()
         .map(|(g, group)| {
             let n = group.lights.len().max(1) as f32;
-            json!({
+            let mut row = json!({
                 "name": group.name,
                 "address": group.address(),
                 "lights": group.lights.iter().map(|&l| scene.lights[l].channel).collect::<Vec<_>>(),
                 "intensity": group.lights.iter().map(|&l| s.live.levels[l].intensity).sum::<f32>() / n,
                 "key": s.key_groups[g],
                 "lock": s.locked_groups[g],
+                "colour": group.lights.iter().any(|&l| scene.profile(l).has_colour()),
+            });
+            let ratio = rules.ratios[g].map(|(a, r)| (scene.groups[a].name.as_str(), r));
+            rules_json(
+                &mut row,
+                ratio,
+                rules.group_saturation[g],
+                rules.group_exclude[g],
+            );
+            row
+        })
+        .collect();
+    let pins: Vec<Value> = rules
+        .pins
+        .iter()
+        .map(|p| {
+            let r = p.region;
+            json!({
+                "id": p.id,
+                "region": [r.x0, r.y0, r.x1, r.y1],
+                "lights": p.lights.iter().map(|&l| scene.lights[l].channel).collect::<Vec<_>>(),
             })
         })
         .collect();
@@ -457,8 +488,40 @@ fn state(e: &Engine) -> Value {
         })).collect::<Vec<_>>(),
         "lights": lights,
         "groups": groups,
+        "pins": pins,
         "objectives": objectives,
     })
+}
+
+/// A setting as the designer typed it: the shortest decimal that reads back as the same
+/// f32 (0.2, not 0.20000000298023224), so the page's number fields show it as typed.
+fn decimal(v: f32) -> f64 {
+    v.to_string().parse().unwrap_or(f64::from(v))
+}
+
+/// Adds a group's or a light's constraints to its row, each only when set (a scene of
+/// hundreds of lights with none set adds nothing): `ratio` `[of, r]`, `saturation`
+/// `[min, max]`, `exclude` (`ignore` or `off`).
+fn rules_json(
+    row: &mut Value,
+    ratio: Option<(&str, f32)>,
+    saturation: Saturation,
+    exclude: Exclude,
+) {
+    if let Some(row) = row.as_object_mut() {
+        if let Some((of, r)) = ratio {
+            row.insert("ratio".into(), json!([of, decimal(r)]));
+        }
+        if !saturation.is_any() {
+            row.insert(
+                "saturation".into(),
+                json!([decimal(saturation.min), decimal(saturation.max)]),
+            );
+        }
+        if exclude != Exclude::None {
+            row.insert("exclude".into(), json!(exclude.name()));
+        }
+    }
 }
 
 /// Every change the engine pushes to tablets, as server-sent events: one event per push,

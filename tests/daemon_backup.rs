@@ -19,7 +19,7 @@ use std::time::{Duration, Instant};
 
 use common::daemon::{
     Daemon, Framing, GENERATE_PATIENCE, Light, Osc, PATIENCE, STAGE, Setup, UNIVERSES, int,
-    look_mismatch, string, text,
+    look_mismatch, num, string, text,
 };
 use common::wire::parse_sacn;
 use rosc::OscMessage;
@@ -530,6 +530,17 @@ fn a_backup_started_after_the_generate_picks_undoes_and_takes_over_as_the_main()
     both_streams_show(&merger, &first, "the look undone to");
     main.ok("/vo/redo", vec![], "/vo/redone");
     both_streams_show(&merger, &picked, "the look redone to");
+    // A step count is forwarded with the command: two steps back to the dark start and
+    // forward again, each one change on both.
+    let r = main.ok("/vo/undo", vec![int(2)], "/vo/undone");
+    assert_eq!(num(&r.args[0]) as i32, 0, "{r:?}");
+    let start = main.live();
+    assert!(start.iter().all(|l| l.intensity == 0.0), "{start:?}");
+    both_streams_show(&merger, &start, "the look two steps back");
+    wait_mirrored(&mut main, &mut backup);
+    main.ok("/vo/redo", vec![int(2)], "/vo/redone");
+    both_streams_show(&merger, &picked, "the look two steps forward");
+    wait_mirrored(&mut main, &mut backup);
 
     // The backup restarted after another generate takes the new gallery the same way.
     backup.kill();

@@ -4,8 +4,8 @@
 mod common;
 
 use common::daemon::{
-    CLUSTERS, COUNT, Daemon, GENERATE_PATIENCE, Light, Osc, STAGE, Udp, fixture, float, int, num,
-    same_look, string, text,
+    CLUSTERS, COUNT, Daemon, GENERATE_PATIENCE, Light, Osc, Proto, STAGE, Udp, fixture, float, int,
+    num, same_look, string, text,
 };
 
 /// A daemon with one objective and a generated gallery; returns it with the entry sizes.
@@ -309,6 +309,84 @@ fn undo_and_redo_walk_the_base_history() {
             "undo {i}: {r:?}"
         );
     }
+}
+
+/// The pushes of one change a subscriber hears, up to `listen`'s fence: how many
+/// `/vo/status` pushes (every change pushes one).
+fn changes_heard(listen: &mut Udp) -> usize {
+    let pushed = listen.fence();
+    pushed.iter().filter(|m| m.addr == "/vo/status").count()
+}
+
+#[test]
+fn undo_and_redo_take_a_step_count_as_one_change() {
+    let (mut d, sizes) = generated("gal-undo-steps");
+    assert!(
+        sizes.len() >= 3,
+        "the test needs three entries, got {sizes:?}"
+    );
+    for k in 1..=3 {
+        d.ok("/vo/pick", vec![int(k)], "/vo/picked");
+    }
+    let (one, three) = (d.candidate(1, 1), d.candidate(3, 1));
+    let mut tablet = d.client();
+    let mut listen = d.client();
+    let port = i32::from(listen.port());
+    tablet.call("/vo/subscribe", vec![int(port)], "/vo/subscribed");
+    listen.fence();
+
+    // The dark start, entry 1 and entry 2 are behind: three steps. Counts that are not
+    // there, not whole or not numbers are refused and change nothing, pushing nothing.
+    let sentence = d.refused("/vo/undo", vec![int(4)]);
+    assert!(sentence.contains("there are 3 steps to undo"), "{sentence}");
+    for bad in [
+        vec![int(-1)],
+        vec![float(1.5)],
+        vec![string("two")],
+        vec![int(1_000_001)],
+    ] {
+        d.refused("/vo/undo", bad);
+    }
+    assert_eq!(d.refused("/vo/redo", vec![int(2)]), "nothing to redo");
+    // 0 is a button's release, as for every trigger: no reply, no change.
+    d.silent("/vo/undo", vec![int(0)]);
+    assert_eq!(changes_heard(&mut listen), 0);
+    assert!(same_look(&d.live(), &three, 1e-6));
+
+    // Two steps back in one change: one push, entry 1's look live and on the wire.
+    let r = d.ok("/vo/undo", vec![int(2)], "/vo/undone");
+    assert_eq!(num(&r.args[0]) as i32, 1, "one step left: {r:?}");
+    assert!(same_look(&d.live(), &one, 1e-6));
+    d.wire.wait_look(Proto::Sacn, &one);
+    assert_eq!(changes_heard(&mut listen), 1, "one change for two steps");
+    assert_eq!(d.status().entry, 0, "no entry is live after an undo");
+    let sentence = d.refused("/vo/redo", vec![int(3)]);
+    assert!(sentence.contains("there are 2 steps to redo"), "{sentence}");
+
+    // Forward both again as one, then all the way back and forward; a path number counts
+    // too (`/vo/undo/3`).
+    let r = d.ok("/vo/redo", vec![int(2)], "/vo/redone");
+    assert_eq!(num(&r.args[0]) as i32, 0, "{r:?}");
+    assert!(same_look(&d.live(), &three, 1e-6));
+    assert_eq!(changes_heard(&mut listen), 1);
+    let r = d.ok("/vo/undo/3", vec![], "/vo/undone");
+    assert_eq!(num(&r.args[0]) as i32, 0, "{r:?}");
+    assert!(
+        d.live().iter().all(|l| l.intensity == 0.0),
+        "{:?}",
+        d.live()
+    );
+    d.refused("/vo/undo", vec![]);
+    // The walked-over steps are still there one at a time.
+    let r = d.ok("/vo/redo", vec![float(1.0)], "/vo/redone");
+    assert_eq!(num(&r.args[0]) as i32, 2, "{r:?}");
+    assert!(same_look(&d.live(), &one, 1e-6));
+    d.ok("/vo/redo", vec![], "/vo/redone");
+    assert!(same_look(&d.live(), &d.candidate(2, 1), 1e-6));
+    let r = d.ok("/vo/redo", vec![int(1)], "/vo/redone");
+    assert_eq!(num(&r.args[0]) as i32, 0, "{r:?}");
+    assert!(same_look(&d.live(), &three, 1e-6));
+    assert_eq!(changes_heard(&mut listen), 4, "one change per command");
 }
 
 #[test]

@@ -2,7 +2,10 @@
 //! allow-list, the password, cross-origin and hostile uploads), and in headless Chromium
 //! driven through the DevTools protocol: a whole designer's session (upload and add
 //! references, draw a region, generate, members, transfer, pick, undo, save, recall), each
-//! step checked on the page, in a screenshot, and on the wire.
+//! step checked on the page, in a screenshot, and on the wire; and the constraints of
+//! groups and lights, a pin and a transfer region drawn on the stage, and a history tap
+//! of several steps as one command, read back from the daemon and checked on the wire,
+//! the page shown at a laptop's and a tablet's width.
 
 mod common;
 
@@ -998,6 +1001,412 @@ fn a_designer_session_in_the_browser() {
         |v| v.as_str().is_some_and(|s| s.contains("fps")),
     );
     page.screenshot("7-recalled");
+    assert_eq!(
+        page.eval("document.getElementById('error').textContent"),
+        ""
+    );
+}
+
+/// Installed in the page: records every command it posts (`window.sent`: address, args and
+/// the answer's body) and how many `/state.json` reads were in flight at once
+/// (`window.reads.most`); each read takes 100 ms longer, as over a slow booth network, so
+/// events arrive while one is in flight.
+const RECORDER: &str = r#"(() => {
+  window.sent = [];
+  window.reads = { now: 0, most: 0, all: 0 };
+  const plain = window.fetch;
+  window.fetch = async (url, opts) => {
+    if (url === "/osc") {
+      const call = JSON.parse(opts.body);
+      window.sent.push(call);
+      const r = await plain(url, opts);
+      call.answer = await r.clone().json().catch(() => null);
+      return r;
+    }
+    if (String(url).startsWith("/state.json")) {
+      window.reads.now++; window.reads.all++;
+      window.reads.most = Math.max(window.reads.most, window.reads.now);
+      try {
+        await new Promise((done) => setTimeout(done, 100));
+        return await plain(url, opts);
+      } finally { window.reads.now--; }
+    }
+    return plain(url, opts);
+  };
+  return true;
+})()"#;
+
+/// An OSC message as words: `/vo/constraint /vo/group/side/ratio front 0.5`.
+fn words(m: &rosc::OscMessage) -> String {
+    let mut out = m.addr.clone();
+    for a in &m.args {
+        out.push(' ');
+        out.push_str(&match a {
+            rosc::OscType::String(s) => s.clone(),
+            rosc::OscType::Float(f) => f.to_string(),
+            rosc::OscType::Int(i) => i.to_string(),
+            other => format!("{other:?}"),
+        });
+    }
+    out
+}
+
+/// The constraints the daemon lists (`/vo/constraints`), as words, without the end.
+fn constraints(d: &mut Daemon) -> Vec<String> {
+    let mut listed = d.call("/vo/constraints", vec![], "/vo/constraints/end");
+    listed.pop();
+    listed.iter().map(words).collect()
+}
+
+/// Sets the value of the control `selector` names and fires its `change`, as a hand does.
+fn change(page: &mut Page, selector: &str, value: &str) {
+    let js = format!(
+        "(() => {{ const e = document.querySelector({selector:?}); if (!e) return false; e.value = {value:?}; e.dispatchEvent(new Event('change')); return true; }})()"
+    );
+    assert_eq!(page.eval(&js), true, "no {selector} on the page");
+}
+
+/// The channels in a list of JSON numbers.
+fn channels(v: &serde_json::Value) -> Vec<i32> {
+    v.as_array()
+        .expect("a list")
+        .iter()
+        .map(|c| c.as_i64().expect("a channel") as i32)
+        .collect()
+}
+
+/// Waits until every command the page posted is answered.
+fn answered(page: &mut Page) {
+    page.wait(
+        "window.sent.every(c => c.answer !== undefined)",
+        "had every command answered",
+        |v| v == true,
+    );
+}
+
+/// The commands the page posted since the last call, in the order it sent them, once
+/// each is answered; forgets them.
+fn sent(page: &mut Page) -> serde_json::Value {
+    answered(page);
+    page.eval("(() => { const s = window.sent; window.sent = []; return s; })()")
+}
+
+/// A mouse drag on the stage, from and to as fractions of its width and height (where
+/// the stage is now: the page above it may have changed).
+fn stage_drag(page: &mut Page, from: (f64, f64), to: (f64, f64)) {
+    let rect = page.eval(
+        "(() => { const b = document.getElementById('stage').getBoundingClientRect(); return [b.left, b.top, b.width, b.height]; })()",
+    );
+    let r: Vec<f64> = serde_json::from_value(rect).expect("rect");
+    let at = |(fx, fy): (f64, f64)| (r[0] + r[2] * fx, r[1] + r[3] * fy);
+    page.drag(at(from), at(to));
+}
+
+/// Shows the page at a width (and height), as a laptop or a tablet does, and saves a
+/// screenshot of it.
+fn at_width(page: &mut Page, name: &str, width: u32, height: u32, mobile: bool) {
+    page.call(
+        "Emulation.setDeviceMetricsOverride",
+        serde_json::json!({ "width": width, "height": height, "deviceScaleFactor": 1, "mobile": mobile }),
+    );
+    page.wait("window.innerWidth", "took the new width", |v| {
+        v.as_u64() == Some(u64::from(width))
+    });
+    page.screenshot(name);
+    let sizes =
+        page.eval("[document.documentElement.scrollWidth, document.documentElement.clientWidth]");
+    assert!(
+        sizes[0].as_u64() <= sizes[1].as_u64(),
+        "{name}: the page is wider than the screen (scroll width, width): {sizes}"
+    );
+}
+
+#[test]
+fn constraints_pins_a_transfer_region_and_history_from_the_browser() {
+    let Some(browser) = chromium() else {
+        return tools::missing("Chromium", "is not installed", "apt-get install chromium");
+    };
+    let (mut d, addr) = start("web-rules");
+    d.ok(
+        "/vo/generate/clusters",
+        vec![int(6)],
+        "/vo/generate/clusters",
+    );
+    d.ok("/vo/fade", vec![common::daemon::float(0.0)], "/vo/fade");
+    d.add_objective("warm.png", "both");
+    d.generate();
+    let n = d.gallery().len();
+    assert!(n >= 3, "the test needs three entries, got {n}");
+    let url = format!("http://{addr}/");
+    let (_browser, mut page) = open(&browser, &url, "rules");
+    page.wait(
+        "typeof st !== 'undefined' && st && st.gallery ? st.gallery.sizes.length : 0",
+        "showed the gallery",
+        |v| v.as_u64() == Some(n as u64),
+    );
+    assert_eq!(page.eval(RECORDER), true);
+
+    // 1. Constraints of groups and lights, set on the page and read back from the daemon.
+    change(&mut page, "#rules .rule[data-name='side'] .ratio", "0.5");
+    change(
+        &mut page,
+        "#rules .rule[data-name='side'] .ratioof",
+        "front",
+    );
+    change(&mut page, "#rules .rule[data-name='back'] .satmin", "0.2");
+    change(&mut page, "#rules .rule[data-name='back'] .satmax", "0.7");
+    change(&mut page, "#rules .rule[data-name='front'] .exclude", "off");
+    change(&mut page, "#lightrules .rule[data-name='3'] .satmax", "0.9");
+    change(
+        &mut page,
+        "#lightrules .rule[data-name='5'] .exclude",
+        "ignore",
+    );
+    page.wait(
+        "JSON.stringify([st.groups.map(g => [g.name, g.ratio, g.saturation, g.exclude]), st.lights.map(l => [l.ch, l.saturation, l.exclude])])",
+        "showed the constraints it set",
+        |v| {
+            v.as_str() == Some(
+                r#"[[["front",null,null,"off"],["side",["front",0.5],null,null],["back",null,[0.2,0.7],null]],[[1,null,null],[2,null,null],[3,[0,0.9],null],[4,null,null],[5,null,"ignore"],[6,null,null]]]"#,
+            )
+        },
+    );
+    let want = [
+        "/vo/constraint /vo/group/front/exclude off",
+        "/vo/constraint /vo/group/side/ratio front 0.5",
+        "/vo/constraint /vo/group/back/saturation 0.2 0.7",
+        "/vo/constraint /vo/light/3/saturation 0 0.9",
+        "/vo/constraint /vo/light/5/exclude ignore",
+    ];
+    assert_eq!(constraints(&mut d), want);
+    // The controls show what the daemon holds; a light without colour has no saturation.
+    assert_eq!(
+        page.eval("document.querySelector(\"#rules .rule[data-name='side'] .ratioof\").value"),
+        "front"
+    );
+    assert_eq!(
+        page.eval("document.querySelectorAll(\"#lightrules .rule[data-name='1'] .satmin, #rules .rule[data-name='front'] .satmin\").length"),
+        0
+    );
+    page.eval("document.querySelector('#lightrules').parentElement.open = true; true");
+    page.screenshot("rules-1-constraints");
+    // A ratio to "nobody" removes it; a refused range (min over max) says why and keeps
+    // the old one.
+    change(&mut page, "#rules .rule[data-name='side'] .ratioof", "");
+    page.wait(
+        "st.groups[1].ratio ?? null",
+        "showed the ratio removed",
+        serde_json::Value::is_null,
+    );
+    // (Its answer in, so it does not clear the error below.)
+    answered(&mut page);
+    change(&mut page, "#rules .rule[data-name='back'] .satmin", "0.8");
+    page.wait(
+        "document.getElementById('error').textContent",
+        "said the range is refused",
+        |v| v.as_str().is_some_and(|e| e.contains("above max")),
+    );
+    page.wait(
+        "document.querySelector(\"#rules .rule[data-name='back'] .satmin\").value",
+        "showed the range the daemon kept",
+        |v| v == "0.2",
+    );
+    assert_eq!(
+        constraints(&mut d),
+        [want[0], want[2], want[3], want[4]],
+        "the ratio is gone, the range kept"
+    );
+    let posted = sent(&mut page);
+    // Changes to one address are sent one after the other, so the order across
+    // addresses is the page's to choose: compare them sorted.
+    let mut addresses: Vec<&str> = posted
+        .as_array()
+        .expect("calls")
+        .iter()
+        .map(|c| c["address"].as_str().expect("address"))
+        .collect();
+    addresses.sort_unstable();
+    assert_eq!(
+        addresses,
+        [
+            "/vo/group/back/saturation",
+            "/vo/group/back/saturation",
+            "/vo/group/back/saturation",
+            "/vo/group/front/exclude",
+            "/vo/group/side/ratio",
+            "/vo/group/side/ratio",
+            "/vo/light/3/saturation",
+            "/vo/light/5/exclude",
+        ],
+        "one command per change: {posted}"
+    );
+
+    // 2. A pin drawn on the stage: its lights reported, shown, then removed.
+    page.click("#drawmode input[value='pin']");
+    stage_drag(&mut page, (0.36, 0.1), (0.64, 0.9));
+    let pin = page.wait("st.pins", "showed the pin", |v| {
+        v.as_array().is_some_and(|p| p.len() == 1)
+    });
+    let pinned = channels(&pin[0]["lights"]);
+    assert!(!pinned.is_empty(), "{pin}");
+    let listed = d.call("/vo/pins", vec![], "/vo/pins/end");
+    assert_eq!(listed.len(), 2, "{listed:?}");
+    let on_daemon: Vec<i32> = listed[0].args[5..]
+        .iter()
+        .map(|a| common::daemon::num(a) as i32)
+        .collect();
+    assert_eq!(on_daemon, pinned);
+    for (i, want) in [0.36, 0.1, 0.64, 0.9].iter().enumerate() {
+        let x = common::daemon::num(&listed[0].args[1 + i]);
+        assert!((x - want).abs() < 0.02, "pin corner {i}: {x} vs {want}");
+    }
+    let id = pin[0]["id"].as_u64().expect("an id");
+    assert_eq!(
+        page.eval(&format!(
+            "document.querySelector(\"#pins .pinitem[data-id='{id}']\").textContent"
+        )),
+        format!(
+            "pin {id}: lights {} \u{d7}",
+            pinned
+                .iter()
+                .map(i32::to_string)
+                .collect::<Vec<_>>()
+                .join(", ")
+        )
+    );
+    assert_eq!(
+        page.eval(&format!(
+            "document.querySelectorAll(\"#stage .pin[data-id='{id}']\").length"
+        )),
+        1
+    );
+    page.screenshot("rules-2-pin");
+    page.click(&format!("#stage .pin[data-id='{id}'] .unpin"));
+    page.wait("st.pins.length", "removed the pin", |v| v == 0);
+    assert_eq!(
+        page.eval("document.querySelectorAll('#stage .pin, #pins .pinitem').length"),
+        0
+    );
+    let listed = d.call("/vo/pins", vec![], "/vo/pins/end");
+    assert_eq!(words(&listed[0]), "/vo/pins/end 0");
+
+    // 3. A transfer region drawn where the pin was, taken from entry 3: its lights are the
+    // pin's (the same rule selects them), the others keep the live look.
+    assert_eq!(
+        page.eval("document.querySelectorAll('#gallery .takeregion:disabled').length"),
+        n
+    );
+    page.click("#drawmode input[value='transfer']");
+    stage_drag(&mut page, (0.36, 0.1), (0.64, 0.9));
+    let drawn = page.wait("xfer", "kept the transfer region", |v| v.is_array());
+    for i in 0..4 {
+        let (a, b) = (drawn[i].as_f64(), pin[0]["region"][i].as_f64());
+        assert!(
+            a.zip(b).is_some_and(|(a, b)| (a - b).abs() < 1e-6),
+            "{drawn} vs {pin}"
+        );
+    }
+    page.wait(
+        "document.querySelectorAll('#stage .xfer').length",
+        "drew the transfer region",
+        |v| v == 1,
+    );
+    let before = d.live();
+    let third = d.candidate(3, 1);
+    sent(&mut page);
+    page.click("#gallery .entry[data-k='3'] .takeregion");
+    let taken: Vec<common::daemon::Light> = before
+        .iter()
+        .zip(&third)
+        .map(|(b, c)| {
+            if pinned.contains(&b.ch) {
+                c.clone()
+            } else {
+                b.clone()
+            }
+        })
+        .collect();
+    shows_on_page_and_wire(&mut page, &d, &taken, "take region");
+    assert_eq!(d.live(), taken);
+    let posted = sent(&mut page);
+    assert_eq!(posted[0]["address"], "/vo/transfer");
+    assert_eq!(posted[0]["args"][0], 3);
+    assert_eq!(posted[0]["args"][1], "region");
+    let reply = &posted[0]["answer"]["replies"][0];
+    assert_eq!(reply["address"], "/vo/transferred");
+    let mut want = vec![3];
+    want.extend(&pinned);
+    assert_eq!(channels(&reply["args"]), want);
+    page.screenshot("rules-3-transfer");
+
+    // 4. History: two picks, then a tap two steps back is one command and one change, and
+    // a tap two steps forward the same.
+    let first = d.candidate(1, 1);
+    page.click("#gallery .entry[data-k='1'] .thumb");
+    shows_on_page_and_wire(&mut page, &d, &first, "pick 1");
+    let second = d.candidate(2, 1);
+    page.click("#gallery .entry[data-k='2'] .thumb");
+    shows_on_page_and_wire(&mut page, &d, &second, "pick 2");
+    images_loaded(
+        &mut page,
+        "#history .undo img",
+        3,
+        "showed three undo steps",
+    );
+    sent(&mut page);
+    page.click("#history .undo[data-steps='2']");
+    shows_on_page_and_wire(&mut page, &d, &taken, "two steps back");
+    page.wait(
+        "[st.history.undo.length, st.history.redo.length]",
+        "showed the history after two steps back",
+        |v| *v == serde_json::json!([1, 2]),
+    );
+    assert_eq!(
+        sent(&mut page),
+        serde_json::json!([{ "address": "/vo/undo", "args": [2],
+            "answer": { "replies": [{ "address": "/vo/undone", "args": [1] }] } }]),
+        "one command for two steps"
+    );
+    images_loaded(&mut page, "#history .redo img", 2, "showed two redo steps");
+    page.screenshot("rules-4-history");
+    page.click("#history .redo[data-steps='2']");
+    shows_on_page_and_wire(&mut page, &d, &second, "two steps forward");
+    assert_eq!(
+        sent(&mut page),
+        serde_json::json!([{ "address": "/vo/redo", "args": [2],
+            "answer": { "replies": [{ "address": "/vo/redone", "args": [0] }] } }])
+    );
+    // A step count the history does not have is refused from the page too.
+    let before = d.live();
+    for bad in [0, 4] {
+        let r = osc(addr, "/vo/undo", serde_json::json!([bad]), &[]);
+        assert_eq!(r.status, 409, "{}", String::from_utf8_lossy(&r.body));
+    }
+    assert_eq!(d.live(), before);
+    assert_eq!(
+        get(addr, "/state.json").json()["history"]["undo"]
+            .as_array()
+            .map(Vec::len),
+        Some(3)
+    );
+
+    // 5. A drag of the objective's region (galleries follow it, each an event): the page
+    // reads its state one read at a time.
+    page.click("#drawmode input[value='objective']");
+    let explored = page.eval("st.gallery.serial");
+    stage_drag(&mut page, (0.05, 0.05), (0.6, 0.95));
+    page.wait("exploring", "ended the drag's explore", |v| v == false);
+    page.wait("st.gallery.serial", "showed an explored gallery", |v| {
+        *v != explored
+    });
+    let reads = page.eval("window.reads");
+    eprintln!("state reads over the test, with 100 ms added to each: {reads}");
+    assert_eq!(reads["most"], 1, "state reads at once: {reads}");
+    assert!(reads["all"].as_u64().is_some_and(|n| n > 0), "{reads}");
+
+    // The page on a laptop and on a tablet.
+    at_width(&mut page, "rules-laptop", 1366, 900, false);
+    at_width(&mut page, "rules-tablet", 820, 1180, true);
     assert_eq!(
         page.eval("document.getElementById('error').textContent"),
         ""

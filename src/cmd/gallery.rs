@@ -10,12 +10,27 @@ use crate::engine::session::{Change, Session};
 use crate::engine::{Engine, Outcome, gallery_look, msg};
 use crate::osc::args::Request;
 
+/// The most steps one `/vo/undo` or `/vo/redo` parses (more than any history holds: a
+/// count over the steps there are is refused with how many there are).
+const MAX_STEPS: i64 = 1_000_000;
+
 pub enum Cmd {
-    Pick { k: usize, m: usize },
-    Step { forward: bool },
-    Undo,
-    Redo,
-    Candidate { k: usize, m: usize },
+    Pick {
+        k: usize,
+        m: usize,
+    },
+    Step {
+        forward: bool,
+    },
+    /// `/vo/undo [steps]` (back) or `/vo/redo [steps]`: one change however many steps.
+    History {
+        back: bool,
+        steps: usize,
+    },
+    Candidate {
+        k: usize,
+        m: usize,
+    },
     Gallery,
 }
 
@@ -35,9 +50,15 @@ impl Cmd {
         } else if req.matches("/vo/prev").is_some() {
             Cmd::Step { forward: false }
         } else if req.matches("/vo/undo").is_some() {
-            Cmd::Undo
+            Cmd::History {
+                back: true,
+                steps: opt_int_arg(req, 0, "undo steps", 1, MAX_STEPS, 1)? as usize,
+            }
         } else if req.matches("/vo/redo").is_some() {
-            Cmd::Redo
+            Cmd::History {
+                back: false,
+                steps: opt_int_arg(req, 0, "redo steps", 1, MAX_STEPS, 1)? as usize,
+            }
         } else if req.matches("/vo/candidate").is_some() {
             let (k, m) = entry(req)?;
             Cmd::Candidate { k, m }
@@ -65,15 +86,20 @@ impl Cmd {
                 };
                 pick(s, k, 1)
             }
-            Cmd::Undo | Cmd::Redo => {
-                let undo = matches!(self, Cmd::Undo);
-                let depth = if undo { s.undo() } else { s.redo() };
-                let depth = depth.ok_or(if undo {
-                    "nothing to undo"
+            Cmd::History { back, steps } => {
+                let (word, addr) = if back {
+                    ("undo", "/vo/undone")
                 } else {
-                    "nothing to redo"
+                    ("redo", "/vo/redone")
+                };
+                let (undo, redo, _) = s.history();
+                let there = if back { undo.len() } else { redo.len() };
+                let depth = if back { s.undo(steps) } else { s.redo(steps) };
+                let depth = depth.ok_or_else(|| match there {
+                    0 => format!("nothing to {word}"),
+                    1 => format!("cannot {word} {steps} steps: there is 1 step to {word}"),
+                    n => format!("cannot {word} {steps} steps: there are {n} steps to {word}"),
                 })?;
-                let addr = if undo { "/vo/undone" } else { "/vo/redone" };
                 Ok(Outcome::reply(msg(addr, vec![int(depth)]))
                     .show_look(s.fade_s)
                     .saved()
