@@ -441,6 +441,29 @@ impl Page {
         mouse(self, "mouseReleased", to, 0);
     }
 
+    /// A finger on the screen (DevTools touch input, as a tablet sends it): down at the
+    /// first point, through the others, up at the last; points in page pixels.
+    fn touch(&mut self, points: &[(f64, f64)]) {
+        let finger = |page: &mut Page, kind: &str, at: Option<(f64, f64)>| {
+            let touching: Vec<serde_json::Value> = at
+                .iter()
+                .map(|&(x, y)| serde_json::json!({ "x": x, "y": y, "radiusX": 8, "radiusY": 8, "force": 1 }))
+                .collect();
+            page.call(
+                "Input.dispatchTouchEvent",
+                serde_json::json!({ "type": kind, "touchPoints": touching }),
+            );
+        };
+        let (Some(&first), Some(_)) = (points.first(), points.last()) else {
+            return;
+        };
+        finger(self, "touchStart", Some(first));
+        for &p in &points[1..] {
+            finger(self, "touchMove", Some(p));
+        }
+        finger(self, "touchEnd", None);
+    }
+
     /// Polls `expression` until `want` holds (bounded); returns the last value.
     fn wait(
         &mut self,
@@ -1407,6 +1430,125 @@ fn constraints_pins_a_transfer_region_and_history_from_the_browser() {
     // The page on a laptop and on a tablet.
     at_width(&mut page, "rules-laptop", 1366, 900, false);
     at_width(&mut page, "rules-tablet", 820, 1180, true);
+    assert_eq!(
+        page.eval("document.getElementById('error').textContent"),
+        ""
+    );
+}
+
+#[test]
+fn a_tablet_session_by_touch() {
+    let Some(browser) = chromium() else {
+        return tools::missing("Chromium", "is not installed", "apt-get install chromium");
+    };
+    let (mut d, addr) = start("web-touch");
+    d.ok(
+        "/vo/generate/clusters",
+        vec![int(6)],
+        "/vo/generate/clusters",
+    );
+    d.ok("/vo/fade", vec![common::daemon::float(0.0)], "/vo/fade");
+    let url = format!("http://{addr}/");
+    let (_browser, mut page) = open(&browser, &url, "touch");
+    // A tablet in portrait: a touch screen, no mouse.
+    page.call(
+        "Emulation.setDeviceMetricsOverride",
+        serde_json::json!({ "width": 820, "height": 1180, "deviceScaleFactor": 1, "mobile": true }),
+    );
+    page.call(
+        "Emulation.setTouchEmulationEnabled",
+        serde_json::json!({ "enabled": true, "maxTouchPoints": 5 }),
+    );
+    page.wait("window.innerWidth", "took the tablet's width", |v| v == 820);
+    page.wait(
+        "typeof st !== 'undefined' && st ? st.status : ''",
+        "showed the daemon's status",
+        |v| v.as_str().is_some_and(|s| s.contains("no gallery yet")),
+    );
+
+    // Taps are clicks: headless Chromium makes no gestures of DevTools touch input (no
+    // click from a tap, no panning), so what is tested by finger is the page's own part,
+    // its pointer-event drags.
+    page.click("#references .ref[data-name='warm.png']");
+    page.wait(
+        "document.querySelectorAll('#objectives .objective').length",
+        "added warm.png",
+        |v| v == 1,
+    );
+    assert_eq!(d.status().objectives, 1);
+
+    // A finger draws its region on the stage (touch pointer events): the drag explores,
+    // and the daemon has the region.
+    let stage = page.eval(
+        "(() => { const s = document.getElementById('stage'); s.scrollIntoView({ block: 'center' }); const b = s.getBoundingClientRect(); return [b.left, b.top, b.width, b.height]; })()",
+    );
+    let r: Vec<f64> = serde_json::from_value(stage).expect("rect");
+    let at = |fx: f64, fy: f64| (r[0] + r[2] * fx, r[1] + r[3] * fy);
+    let path: Vec<(f64, f64)> = (0..=10)
+        .map(|i| {
+            let f = f64::from(i) / 10.0;
+            at(0.2 + 0.4 * f, 0.1 + 0.7 * f)
+        })
+        .collect();
+    page.touch(&path);
+    page.wait("exploring", "ended the finger's explore", |v| v == false);
+    let listing = d.call("/vo/objectives", vec![], "/vo/objectives/end");
+    for (i, want) in [0.2, 0.1, 0.6, 0.8].iter().enumerate() {
+        let got = common::daemon::num(&listing[0].args[3 + i]);
+        assert!(
+            (got - want).abs() < 0.02,
+            "x0 y0 x1 y1 {i}: {got} vs {want}"
+        );
+    }
+    page.wait(
+        "st.gallery ? st.gallery.sizes.length : 0",
+        "showed the gallery the drag explored",
+        |v| v.as_u64().is_some_and(|n| n >= 2),
+    );
+    images_loaded(
+        &mut page,
+        "#gallery .thumb img",
+        d.gallery().len(),
+        "showed the gallery",
+    );
+
+    // Entry 2 put live: on the page and on the wire.
+    page.click("#gallery .entry[data-k='2'] .thumb");
+    page.wait("st.entry", "put entry 2 live", |v| v == 2);
+    assert_eq!(d.status().entry, 2);
+    let live = common::daemon::lights(&d.ok("/vo/live", vec![], "/vo/live").args);
+    shows_on_page_and_wire(&mut page, &d, &live, "entry 2 by touch");
+
+    // A pin drawn with a finger, then removed with a finger: the remove button is big
+    // enough for one (44 px, the usual touch target).
+    page.click("input[name='drawmode'][value='pin']");
+    page.wait(
+        "document.querySelector(\"input[name='drawmode'][value='pin']\").checked",
+        "chose pins",
+        |v| v == true,
+    );
+    let stage = page.eval(
+        "(() => { const s = document.getElementById('stage'); s.scrollIntoView({ block: 'center' }); const b = s.getBoundingClientRect(); return [b.left, b.top, b.width, b.height]; })()",
+    );
+    let r: Vec<f64> = serde_json::from_value(stage).expect("rect");
+    let at = |fx: f64, fy: f64| (r[0] + r[2] * fx, r[1] + r[3] * fy);
+    page.touch(&[at(0.05, 0.1), at(0.2, 0.4), at(0.45, 0.9)]);
+    page.wait("st.pins.length", "added the pin drawn by a finger", |v| {
+        v == 1
+    });
+    let pins = d.call("/vo/pins", vec![], "/vo/pins/end");
+    assert_eq!(pins.len(), 2, "one pin and the end: {pins:?}");
+    let size = page.eval(
+        "(() => { const b = document.querySelector('#stage .pin .unpin').getBoundingClientRect(); return Math.min(b.width, b.height); })()",
+    );
+    assert!(
+        size.as_f64().is_some_and(|s| s >= 44.0),
+        "the pin's remove button is {size} px: too small for a finger"
+    );
+    page.click("#stage .pin .unpin");
+    page.wait("st.pins.length", "removed the pin", |v| v == 0);
+    assert_eq!(d.call("/vo/pins", vec![], "/vo/pins/end").len(), 1);
+    page.screenshot("touch-tablet");
     assert_eq!(
         page.eval("document.getElementById('error').textContent"),
         ""
