@@ -832,21 +832,14 @@ impl Session<'_> {
         let part_look = Look {
             levels: lit.iter().map(|&l| look.levels[l]).collect(),
         };
-        let preview = |s: &Scene| -> Result<Vec<f32>, CaptureError> {
-            let basis = visobjd_compositor::basis::load(s, &[(0, Precision::Single)])
-                .map_err(|e| CaptureError::Files(e.to_string()))?;
-            let basis = basis
-                .first()
-                .ok_or_else(|| CaptureError::Files("no basis images".into()))?;
-            Ok(visobjd_compositor::render::render_reference(
-                basis, &part_look, 1.0,
-            ))
-        };
-        let per_emitter = preview(&part)?;
-        for light in &mut part.lights {
-            light.emitter_basis.clear();
-        }
-        let white_only = preview(&part)?;
+        let mut basis = visobjd_compositor::basis::load(&part, &[(0, Precision::Single)])
+            .map_err(|e| CaptureError::Files(e.to_string()))?
+            .pop()
+            .ok_or_else(|| CaptureError::Files("no basis images".into()))?;
+        let per_emitter = visobjd_compositor::render::render_reference(&basis, &part_look, 1.0);
+        // The same images without their emitters': each light from its white image.
+        basis.emitter_images.fill(None);
+        let white_only = visobjd_compositor::render::render_reference(&basis, &part_look, 1.0);
         let patch = std::mem::replace(&mut self.patch, Patch::new(&scene));
         let shot = self.shoot_look(&look, None, false);
         self.patch = patch;
