@@ -799,20 +799,29 @@ fn images_loaded(page: &mut Page, selector: &str, n: usize, what: &str) {
     page.wait(&js, what, |v| v.as_u64() == Some(n as u64));
 }
 
-#[test]
-fn a_designer_session_in_the_browser() {
+/// A daemon (6 entries a gallery, no fade) with its web page open in headless Chromium
+/// (`web-NAME`), and the page's address; None without Chromium (see [`tools::missing`]).
+fn browse(name: &str) -> Option<(Daemon, SocketAddr, Browser, Page)> {
     let Some(browser) = chromium() else {
-        return tools::missing("Chromium", "is not installed", "apt-get install chromium");
+        tools::missing("Chromium", "is not installed", "apt-get install chromium");
+        return None;
     };
-    let (mut d, addr) = start("web-session");
+    let (mut d, addr) = start(&format!("web-{name}"));
     d.ok(
         "/vo/generate/clusters",
         vec![int(6)],
         "/vo/generate/clusters",
     );
     d.ok("/vo/fade", vec![common::daemon::float(0.0)], "/vo/fade");
-    let url = format!("http://{addr}/");
-    let (_browser, mut page) = open(&browser, &url, "session");
+    let (b, page) = open(&browser, &format!("http://{addr}/"), name);
+    Some((d, addr, b, page))
+}
+
+#[test]
+fn a_designer_session_in_the_browser() {
+    let Some((mut d, _, _browser, mut page)) = browse("session") else {
+        return;
+    };
     page.wait(
         "document.getElementById('status')?.textContent ?? ''",
         "showed the daemon's status",
@@ -1146,22 +1155,13 @@ fn at_width(page: &mut Page, name: &str, width: u32, height: u32, mobile: bool) 
 
 #[test]
 fn constraints_pins_a_transfer_region_and_history_from_the_browser() {
-    let Some(browser) = chromium() else {
-        return tools::missing("Chromium", "is not installed", "apt-get install chromium");
+    let Some((mut d, addr, _browser, mut page)) = browse("rules") else {
+        return;
     };
-    let (mut d, addr) = start("web-rules");
-    d.ok(
-        "/vo/generate/clusters",
-        vec![int(6)],
-        "/vo/generate/clusters",
-    );
-    d.ok("/vo/fade", vec![common::daemon::float(0.0)], "/vo/fade");
     d.add_objective("warm.png", "both");
     d.generate();
     let n = d.gallery().len();
     assert!(n >= 3, "the test needs three entries, got {n}");
-    let url = format!("http://{addr}/");
-    let (_browser, mut page) = open(&browser, &url, "rules");
     page.wait(
         "typeof st !== 'undefined' && st && st.gallery ? st.gallery.sizes.length : 0",
         "showed the gallery",
@@ -1438,18 +1438,9 @@ fn constraints_pins_a_transfer_region_and_history_from_the_browser() {
 
 #[test]
 fn a_tablet_session_by_touch() {
-    let Some(browser) = chromium() else {
-        return tools::missing("Chromium", "is not installed", "apt-get install chromium");
+    let Some((mut d, _, _browser, mut page)) = browse("touch") else {
+        return;
     };
-    let (mut d, addr) = start("web-touch");
-    d.ok(
-        "/vo/generate/clusters",
-        vec![int(6)],
-        "/vo/generate/clusters",
-    );
-    d.ok("/vo/fade", vec![common::daemon::float(0.0)], "/vo/fade");
-    let url = format!("http://{addr}/");
-    let (_browser, mut page) = open(&browser, &url, "touch");
     // A tablet in portrait: a touch screen, no mouse.
     page.call(
         "Emulation.setDeviceMetricsOverride",
