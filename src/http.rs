@@ -669,6 +669,16 @@ fn jpeg(pic: Picture) -> Response {
     ([(header::CONTENT_TYPE, "image/jpeg")], pic).into_response()
 }
 
+/// The picture cached under `key`. The cache is held to look up (and to [`keep`]), not
+/// across a render or a decode: pictures the page asks for at once render side by side.
+async fn cached<K: PartialEq>(cache: &Mutex<Vec<(K, Picture)>>, key: &K) -> Option<Picture> {
+    let cache = cache.lock().await;
+    cache
+        .iter()
+        .find(|(k, _)| k == key)
+        .map(|(_, pic)| pic.clone())
+}
+
 /// Keeps `value` under `key` in a cache of at most [`CACHED`] entries, oldest dropped.
 fn keep<K>(cache: &mut Vec<(K, Picture)>, key: K, value: &Picture) {
     if cache.len() >= CACHED {
@@ -684,16 +694,7 @@ fn number_jpg<T: std::str::FromStr>(file: &str) -> Option<T> {
 
 /// A look as the stage picture, from the cache or rendered.
 async fn render(sh: &Shared, look: Look) -> Response {
-    // The cache is held to look up and to insert, not across the render: pictures the
-    // page asks for at once (history, saved looks, members) render side by side.
-    let cached = {
-        let cache = sh.renders.lock().await;
-        cache
-            .iter()
-            .find(|(l, _)| *l == look)
-            .map(|(_, pic)| pic.clone())
-    };
-    if let Some(pic) = cached {
+    if let Some(pic) = cached(&sh.renders, &look).await {
         return jpeg(pic);
     }
     let engine = Arc::clone(&sh.engine);
@@ -905,15 +906,7 @@ async fn reference_picture(sh: &Shared, name: String) -> Response {
         meta.as_ref().map_or(0, std::fs::Metadata::len),
         meta.and_then(|m| m.modified().ok()),
     );
-    // As `render`: the cache is held to look up and to insert, not across the decode.
-    let cached = {
-        let cache = sh.files.lock().await;
-        cache
-            .iter()
-            .find(|(k, _)| *k == key)
-            .map(|(_, pic)| pic.clone())
-    };
-    if let Some(pic) = cached {
+    if let Some(pic) = cached(&sh.files, &key).await {
         return jpeg(pic);
     }
     let decoded = blocking(move || {
