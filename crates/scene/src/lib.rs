@@ -466,20 +466,21 @@ impl Scene {
     }
 }
 
-/// A light's `emitter_basis` in its profile's emitter order: none, or one safe relative
-/// path for every emitter the colour model mixes (a partial set could not preview a mix).
-fn emitter_basis<'a>(l: &'a LightFile, profile: &Profile) -> Result<Vec<&'a Path>, String> {
-    if l.emitter_basis.is_empty() {
+/// Light `l`'s table `field` (`map`) in its profile's emitter order: none, or an entry for
+/// every emitter the colour model mixes and for no other (a partial set could not mix).
+fn per_emitter<'a, V>(
+    l: &LightFile,
+    profile: &Profile,
+    field: &str,
+    map: &'a BTreeMap<String, V>,
+) -> Result<Vec<(&'a str, &'a V)>, String> {
+    if map.is_empty() {
         return Ok(Vec::new());
     }
     let names = profile.mixed_emitters();
-    if let Some(extra) = l
-        .emitter_basis
-        .keys()
-        .find(|k| !names.contains(&k.as_str()))
-    {
+    if let Some(extra) = map.keys().find(|k| !names.contains(&k.as_str())) {
         return Err(format!(
-            "light {}: emitter_basis `{extra}` is not an emitter of profile `{}` ({})",
+            "light {}: {field} `{extra}` is not an emitter of profile `{}` ({})",
             l.channel,
             profile.name,
             if names.is_empty() {
@@ -492,12 +493,24 @@ fn emitter_basis<'a>(l: &'a LightFile, profile: &Profile) -> Result<Vec<&'a Path
     names
         .iter()
         .map(|n| {
-            let p = l.emitter_basis.get(*n).ok_or_else(|| {
-                format!(
-                    "light {}: emitter_basis has no image for emitter `{n}` (give one per emitter, or none)",
-                    l.channel
-                )
-            })?;
+            map.get_key_value(*n)
+                .map(|(k, v)| (k.as_str(), v))
+                .ok_or_else(|| {
+                    format!(
+                        "light {}: {field} has no `{n}` (give every emitter, or none)",
+                        l.channel
+                    )
+                })
+        })
+        .collect()
+}
+
+/// A light's `emitter_basis` in its profile's emitter order ([`per_emitter`]), each a
+/// safe relative path.
+fn emitter_basis<'a>(l: &'a LightFile, profile: &Profile) -> Result<Vec<&'a Path>, String> {
+    per_emitter(l, profile, "emitter_basis", &l.emitter_basis)?
+        .into_iter()
+        .map(|(_, p)| {
             safe_relative(p).ok_or_else(|| {
                 format!(
                     "light {}: emitter_basis `{p}` must be a relative path inside the scene folder",
@@ -508,33 +521,12 @@ fn emitter_basis<'a>(l: &'a LightFile, profile: &Profile) -> Result<Vec<&'a Path
         .collect()
 }
 
-/// A light's `emitter_measured` as CIE XYZ in its profile's emitter order: none, or every
-/// emitter the colour model mixes with a finite positive flux and an xy of a real colour
-/// (0 < x, 0 < y, x + y < 1).
+/// A light's `emitter_measured` as CIE XYZ in its profile's emitter order ([`per_emitter`]),
+/// each with a finite positive flux and an xy of a real colour (0 < x, 0 < y, x + y < 1).
 fn emitter_measured(l: &LightFile, profile: &Profile) -> Result<Vec<[f64; 3]>, String> {
-    if l.emitter_measured.is_empty() {
-        return Ok(Vec::new());
-    }
-    let names = profile.mixed_emitters();
-    if let Some(extra) = l
-        .emitter_measured
-        .keys()
-        .find(|k| !names.contains(&k.as_str()))
-    {
-        return Err(format!(
-            "light {}: emitter_measured `{extra}` is not an emitter of profile `{}`",
-            l.channel, profile.name
-        ));
-    }
-    names
-        .iter()
-        .map(|n| {
-            let m = l.emitter_measured.get(*n).ok_or_else(|| {
-                format!(
-                    "light {}: emitter_measured has no `{n}` (give every emitter, or none: capture --emitters measures them)",
-                    l.channel
-                )
-            })?;
+    per_emitter(l, profile, "emitter_measured", &l.emitter_measured)?
+        .into_iter()
+        .map(|(n, m)| {
             let [x, y] = m.xy;
             let xy_ok = x.is_finite() && y.is_finite() && x > 0.0 && y > 0.0 && x + y < 1.0;
             if !xy_ok {
@@ -550,7 +542,7 @@ fn emitter_measured(l: &LightFile, profile: &Profile) -> Result<Vec<[f64; 3]>, S
                 ));
             }
             Ok(crate::profile::Emitter {
-                name: (*n).to_string(),
+                name: n.to_string(),
                 xy: m.xy,
                 flux: m.flux,
             }
@@ -683,7 +675,7 @@ mod tests {
         for (text, says) in [
             (
                 format!("{light}[light.emitter_basis]\nred = \"r.exr\"\n"),
-                "light 4: emitter_basis has no image for emitter `green` (give one per emitter, or none)",
+                "light 4: emitter_basis has no `green` (give every emitter, or none)",
             ),
             (
                 format!(
@@ -742,7 +734,7 @@ mod tests {
         for (text, says) in [
             (
                 format!("{light}[light.emitter_measured]\nred = {{ xy = [0.6, 0.35], flux = 1.0 }}\n"),
-                "light 4: emitter_measured has no `green` (give every emitter, or none: capture --emitters measures them)".to_string(),
+                "light 4: emitter_measured has no `green` (give every emitter, or none)".to_string(),
             ),
             (
                 table("{ xy = [0.6, 0.35], flux = 0.0 }"),
@@ -758,7 +750,7 @@ mod tests {
             ),
             (
                 format!("{}white = {{ xy = [0.3, 0.3], flux = 1.0 }}\n", table("{ xy = [0.6, 0.35], flux = 0.2 }")),
-                "light 4: emitter_measured `white` is not an emitter of profile `rgb`".into(),
+                "light 4: emitter_measured `white` is not an emitter of profile `rgb` (red, green, blue)".into(),
             ),
         ] {
             let e = Scene::parse(Path::new("/s"), &text)
