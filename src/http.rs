@@ -572,9 +572,11 @@ struct Call {
     args: Vec<Value>,
 }
 
-/// Addresses the page may not send: they set up links between daemons or subscriptions
-/// to the sender's UDP port, which a browser does not have.
-const NOT_FROM_THE_PAGE: [&str; 3] = ["/vo/backup/", "/vo/subscribe", "/vo/unsubscribe"];
+/// Commands the page may not send (their first segment after `vo`): they set up links
+/// between daemons or subscriptions to the sender's UDP port, which a browser does not
+/// have. Told from the parsed address, as the handler reads it (`/vo//subscribe` is
+/// `/vo/subscribe`).
+const NOT_FROM_THE_PAGE: [&str; 3] = ["backup", "subscribe", "unsubscribe"];
 
 /// `POST /osc`: runs the command through the OSC handler as if the browser's host had sent
 /// it: 200 with the replies, 409 with the `/vo/error` sentence (nothing changed).
@@ -595,13 +597,6 @@ async fn command(
             );
         }
     };
-    let lower = call.address.to_ascii_lowercase();
-    if !lower.starts_with("/vo/") || NOT_FROM_THE_PAGE.iter().any(|p| lower.starts_with(p)) {
-        return refuse(
-            StatusCode::FORBIDDEN,
-            &format!("{} cannot be sent from the page", call.address),
-        );
-    }
     let mut args = Vec::with_capacity(call.args.len());
     for a in &call.args {
         args.push(match a {
@@ -622,15 +617,23 @@ async fn command(
             }
         });
     }
-    let message = OscMessage {
+    let request = crate::osc::args::Request::new(OscMessage {
         addr: call.address.clone(),
         args,
+    });
+    let refused = match request.segments.as_slice() {
+        [vo, command, ..] => vo != "vo" || NOT_FROM_THE_PAGE.contains(&command.as_str()),
+        _ => true,
     };
+    if refused {
+        return refuse(
+            StatusCode::FORBIDDEN,
+            &format!("{} cannot be sent from the page", call.address),
+        );
+    }
     let handler = EngineHandler(Arc::clone(&sh.engine));
     let (peer, _later) = Peer::capture(from);
-    let Some(replies) =
-        blocking(move || handler.handle(crate::osc::args::Request::new(message), &peer)).await
-    else {
+    let Some(replies) = blocking(move || handler.handle(request, &peer)).await else {
         return refuse(StatusCode::INTERNAL_SERVER_ERROR, "the command failed");
     };
     let listed: Vec<Value> = replies.iter().map(message_json).collect();
