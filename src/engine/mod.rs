@@ -574,15 +574,16 @@ impl Engine {
         // Seeds travel as OSC int32: a random one stays in 1..=i32::MAX so it can be replayed.
         let seed = seed.unwrap_or_else(|| s.next_seed());
         let serial = self.generates.fetch_add(1, Ordering::SeqCst) + 1;
-        let mut started_msgs = vec![progress(0.0)];
-        started_msgs.extend(self.feedback(&s));
-        drop(s);
+        let mut started = vec![progress(0.0)];
+        started.extend(self.feedback(&s));
+        // In the session's order, as every change: a change made before the drawing
+        // starts pushes after this, not before it.
+        self.publish(s, &started);
         let engine = Arc::clone(self);
         let peer = peer.clone();
         let spawned = self.threads.spawn("generate", move || {
             // Whatever happens below, the next generate is allowed.
             let running = Running(&engine.generating);
-            engine.notify(&started_msgs);
             let mut tenths = Tenths::default();
             let drawn = engine.draw(&inputs, seed, serial, |f| {
                 if tenths.crossed(f) {
@@ -597,11 +598,7 @@ impl Engine {
                 let e = error("/vo/generate", &why);
                 // Free before the answer: the requester may generate again at once.
                 drop(running);
-                // The bar ends and the status line stops saying "generating...".
-                let s = engine.session();
-                let mut pushes = vec![progress(1.0)];
-                pushes.extend(engine.feedback(&s));
-                engine.publish(s, &pushes);
+                engine.generate_ended();
                 engine.poke_explorer();
                 peer.reply(std::slice::from_ref(&e));
                 return;
@@ -630,9 +627,19 @@ impl Engine {
         });
         if let Err(e) = spawned {
             self.generating.store(false, Ordering::SeqCst);
+            self.generate_ended();
             return Err(format!("cannot start the generate: {e}"));
         }
         Ok(())
+    }
+
+    /// Tells subscribers a generate ended without a gallery: the bar at its end, the status
+    /// line no longer "generating...".
+    fn generate_ended(&self) {
+        let s = self.session();
+        let mut pushes = vec![progress(1.0)];
+        pushes.extend(self.feedback(&s));
+        self.publish(s, &pushes);
     }
 
     /// Draws a gallery from `inputs` with `seed` on the compute pool (whose threads run at
