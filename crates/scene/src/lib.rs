@@ -420,24 +420,14 @@ impl Scene {
             .ok()
     }
 
-    /// The group called `name` (exact match first, then case-insensitive, then by its
-    /// address form, so `/vo/group/front_warm/...` finds `front warm`).
+    /// The group called `name`, case-insensitively, as written or in its address form
+    /// (`/vo/group/front_warm/...` finds `front warm`): loading refuses two groups that
+    /// share an address form, so at most one matches.
     pub fn group_index(&self, name: &str) -> Option<usize> {
-        let groups = &self.groups;
-        groups
+        let address = address_segment(name);
+        self.groups
             .iter()
-            .position(|g| g.name == name)
-            .or_else(|| {
-                groups
-                    .iter()
-                    .position(|g| g.name.eq_ignore_ascii_case(name))
-            })
-            .or_else(|| {
-                let address = address_segment(name);
-                groups
-                    .iter()
-                    .position(|g| g.address().eq_ignore_ascii_case(&address))
-            })
+            .position(|g| g.address().eq_ignore_ascii_case(&address))
     }
 
     /// The profile of light `i`.
