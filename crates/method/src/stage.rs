@@ -276,21 +276,6 @@ mod tests {
         let (again, twice) = run(&st, 300, 7);
         assert_eq!(seen, twice);
         assert_eq!(g.candidates, again.candidates);
-        // Watching changes nothing: the same gallery as a generate without an observer.
-        let objectives = [objective()];
-        let base = Look::off(12);
-        let plain = st.generate(
-            &GenerateRequest {
-                objectives: &objectives,
-                constraints: &Constraints::none(&st.rig),
-                base: &base,
-                spread: Spread::default(),
-                count: 300,
-                clusters: 12,
-            },
-            &mut rand::rngs::Xoshiro256PlusPlus::seed_from_u64(7),
-        );
-        assert_eq!((plain.candidates, plain.entries), (g.candidates, g.entries));
     }
 
     #[test]

@@ -25,7 +25,6 @@ pub struct Footprints {
     height: usize,
     /// `luma[l * pixels + p]`.
     luma: Vec<f32>,
-    lights: usize,
     /// Per light, summed-area tables of its bright and highlight pixels: at each corner of
     /// the pixel grid (`(width + 1) * (height + 1)` per light, row by row) how many lie above
     /// and left of it. A region's counts are then four lookups per light whatever its
@@ -70,13 +69,15 @@ impl Footprints {
             width,
             height,
             luma,
-            lights,
             counts,
         }
     }
 
     fn lights(&self) -> usize {
-        self.lights
+        self.luma
+            .len()
+            .checked_div(self.width * self.height)
+            .unwrap_or(0)
     }
 
     fn light(&self, l: usize) -> &[f32] {
