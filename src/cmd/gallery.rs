@@ -10,10 +10,6 @@ use crate::engine::session::{Change, Session};
 use crate::engine::{Engine, Outcome, gallery_look, msg};
 use crate::osc::args::Request;
 
-/// The most steps one `/vo/undo` or `/vo/redo` parses (more than any history holds: a
-/// count over the steps there are is refused with how many there are).
-const MAX_STEPS: i64 = 1_000_000;
-
 pub enum Cmd {
     Pick {
         k: usize,
@@ -52,12 +48,12 @@ impl Cmd {
         } else if req.matches("/vo/undo").is_some() {
             Cmd::History {
                 back: true,
-                steps: opt_int_arg(req, 0, "undo steps", 1, MAX_STEPS, 1)? as usize,
+                steps: opt_int_arg(req, 0, "undo steps", 1, i64::from(i32::MAX), 1)? as usize,
             }
         } else if req.matches("/vo/redo").is_some() {
             Cmd::History {
                 back: false,
-                steps: opt_int_arg(req, 0, "redo steps", 1, MAX_STEPS, 1)? as usize,
+                steps: opt_int_arg(req, 0, "redo steps", 1, i64::from(i32::MAX), 1)? as usize,
             }
         } else if req.matches("/vo/candidate").is_some() {
             let (k, m) = entry(req)?;
@@ -92,10 +88,8 @@ impl Cmd {
                 } else {
                     ("redo", "/vo/redone")
                 };
-                let (undo, redo, _) = s.history();
-                let there = if back { undo.len() } else { redo.len() };
                 let depth = if back { s.undo(steps) } else { s.redo(steps) };
-                let depth = depth.ok_or_else(|| match there {
+                let depth = depth.map_err(|there| match there {
                     0 => format!("nothing to {word}"),
                     1 => format!("cannot {word} {steps} steps: there is 1 step to {word}"),
                     n => format!("cannot {word} {steps} steps: there are {n} steps to {word}"),

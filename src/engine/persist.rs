@@ -631,7 +631,7 @@ mod tests {
         });
         s.set_base(look(0.1), Change::Step);
         s.set_base(look(0.2), Change::Fader);
-        s.undo(1);
+        s.undo(1).expect("a step to undo");
         s.entry = Some((3, 2));
         s.console_selection = vec![1];
         s.following = true;
@@ -658,7 +658,7 @@ mod tests {
             (main.live.clone(), main.base.clone())
         );
         // The history goes on as on the main.
-        assert_eq!(s.redo(1), Some(0));
+        assert_eq!(s.redo(1), Ok(0));
         assert_eq!(s.base, look(0.2));
     }
 

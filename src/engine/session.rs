@@ -201,34 +201,34 @@ impl Session {
     }
 
     /// Steps back `steps` base looks as one change (the live look goes straight to the
-    /// oldest of them); the remaining undo depth, or None (nothing changed) when `steps`
-    /// is 0 or more than there are.
-    pub fn undo(&mut self, steps: usize) -> Option<usize> {
+    /// oldest of them); the remaining undo depth, or, when `steps` is 0 or more than there
+    /// are, how many there are (nothing changed).
+    pub fn undo(&mut self, steps: usize) -> Result<usize, usize> {
         self.walk(true, steps)
     }
 
     /// Steps forward `steps` base looks again, as [`Session::undo`]; the remaining redo
-    /// depth, or None (nothing changed).
-    pub fn redo(&mut self, steps: usize) -> Option<usize> {
+    /// depth, or how many there are (nothing changed).
+    pub fn redo(&mut self, steps: usize) -> Result<usize, usize> {
         self.walk(false, steps)
     }
 
     /// Moves `steps` base looks from one history stack to the other, back or forward.
-    fn walk(&mut self, back: bool, steps: usize) -> Option<usize> {
+    fn walk(&mut self, back: bool, steps: usize) -> Result<usize, usize> {
         let (from, to) = if back {
             (&mut self.undo, &mut self.redo)
         } else {
             (&mut self.redo, &mut self.undo)
         };
         if steps == 0 || steps > from.len() {
-            return None;
+            return Err(from.len());
         }
         for next in from.drain(from.len() - steps..).rev() {
             to.push(std::mem::replace(&mut self.base, next));
         }
         let left = from.len();
         self.after_history_step();
-        Some(left)
+        Ok(left)
     }
 
     fn after_history_step(&mut self) {
@@ -281,16 +281,16 @@ mod tests {
         let mut s = Session::new(&scene(), 100, 12, 2.0);
         s.set_base(look(0.1), Change::Step);
         s.set_base(look(0.2), Change::Step);
-        assert_eq!(s.undo(1), Some(1));
+        assert_eq!(s.undo(1), Ok(1));
         assert_eq!(s.base, look(0.1));
         assert_eq!(s.live, look(0.1));
-        assert_eq!(s.redo(1), Some(0));
+        assert_eq!(s.redo(1), Ok(0));
         assert_eq!(s.base, look(0.2));
-        assert_eq!(s.redo(1), None);
-        assert_eq!(s.undo(1), Some(1));
-        assert_eq!(s.undo(1), Some(0));
+        assert_eq!(s.redo(1), Err(0));
+        assert_eq!(s.undo(1), Ok(1));
+        assert_eq!(s.undo(1), Ok(0));
         assert_eq!(s.base, look(0.0));
-        assert_eq!(s.undo(1), None);
+        assert_eq!(s.undo(1), Err(0));
     }
 
     #[test]
@@ -301,20 +301,20 @@ mod tests {
         }
         s.entry = Some((2, 1));
         let before = (s.base.clone(), s.history().0.to_vec());
-        assert_eq!(s.undo(0), None);
-        assert_eq!(s.undo(5), None);
-        assert_eq!(s.redo(1), None);
+        assert_eq!(s.undo(0), Err(4));
+        assert_eq!(s.undo(5), Err(4));
+        assert_eq!(s.redo(1), Err(0));
         assert_eq!((s.base.clone(), s.history().0.to_vec()), before);
         assert_eq!(s.entry, Some((2, 1)), "a refused walk changes nothing");
-        assert_eq!(s.undo(3), Some(1));
+        assert_eq!(s.undo(3), Ok(1));
         assert_eq!((s.base.clone(), s.live.clone()), (look(0.1), look(0.1)));
         assert_eq!(s.entry, None);
         // The steps walked over are redone one at a time, nearest first, or together.
-        assert_eq!(s.redo(1), Some(2));
+        assert_eq!(s.redo(1), Ok(2));
         assert_eq!(s.base, look(0.2));
-        assert_eq!(s.redo(2), Some(0));
+        assert_eq!(s.redo(2), Ok(0));
         assert_eq!(s.base, look(0.4));
-        assert_eq!(s.undo(4), Some(0));
+        assert_eq!(s.undo(4), Ok(0));
         assert_eq!(s.base, look(0.0));
     }
 
@@ -327,7 +327,7 @@ mod tests {
             s.set_base(look(i as f32 / 10.0), Change::Follow);
         }
         assert!(s.following);
-        assert_eq!(s.undo(1), Some(1), "the followed changes are one step");
+        assert_eq!(s.undo(1), Ok(1), "the followed changes are one step");
         assert_eq!(s.base, look(0.1));
         assert!(!s.following, "an undo is a visobjd look");
         s.following = true;
@@ -346,12 +346,12 @@ mod tests {
         for i in 0..10 {
             s.set_base(look(i as f32 / 10.0), Change::Fader);
         }
-        assert_eq!(s.undo(1), Some(0), "one step for a fader move");
+        assert_eq!(s.undo(1), Ok(0), "one step for a fader move");
         for i in 0..200 {
             s.set_base(look(i as f32 / 200.0), Change::Step);
         }
         let mut depth = 0;
-        while s.undo(1).is_some() {
+        while s.undo(1).is_ok() {
             depth += 1;
         }
         assert_eq!(depth, HISTORY);
