@@ -858,7 +858,6 @@ async fn selected(State(sh): State<Arc<Shared>>, UrlPath(file): UrlPath<String>)
     for (level, on) in look.levels.iter_mut().zip(chosen) {
         if on {
             level.intensity = 1.0;
-            level.color = [1.0, 1.0, 1.0];
         }
     }
     render(&sh, look).await

@@ -25,7 +25,6 @@ use visobjd_camera::{Camera, Shutter};
 use visobjd_compositor::basis::Precision;
 use visobjd_dmx::{Frame, Output, Patch};
 use visobjd_hdr::{BracketSettings, ExposureFit, MergeSettings, Radiance, Response};
-use visobjd_scene::emitter::ColourModel;
 use visobjd_scene::emitter::colour::{ciede2000, linear_srgb_to_xyz, xyz_to_lab};
 use visobjd_scene::look::{Level, Look};
 use visobjd_scene::{MeasuredEmitter, Scene, SceneFile};
@@ -322,7 +321,7 @@ impl Session<'_> {
             let all = Look {
                 levels: vec![WHITE; self.scene.lights.len()],
             };
-            self.show(&all, None)?;
+            self.show(&all, self.patch.unmastered(&all))?;
             let shots = self.response_bracket()?;
             let frames: Vec<_> = shots.iter().map(decode::Shot::frame).collect();
             let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(self.opts.seed);
@@ -351,8 +350,9 @@ impl Session<'_> {
             self.progress.light_done();
         }
         self.progress.step("ambient light again: everything at 0");
+        let off = Look::off(self.scene.lights.len());
         let end = self
-            .shoot_look(&Look::off(self.scene.lights.len()), None, true)?
+            .shoot_look(&off, self.patch.unmastered(&off), true)?
             .radiance;
         let drift = visobjd_hdr::ambient_drift(&ambient, &again, &end)?;
         if drift.relative > 0.05 {
@@ -395,7 +395,7 @@ impl Session<'_> {
         let (started, waited) = (Instant::now(), self.waited);
         let mut look = Look::off(self.scene.lights.len());
         look.levels[l] = WHITE;
-        let merged = self.shoot_look(&look, None, false)?;
+        let merged = self.shoot_look(&look, self.patch.unmastered(&look), false)?;
         let mut test = visobjd_hdr::light_test(&merged.radiance, ambient)?;
         let above = above_null(&merged.radiance, ambient, again);
         test.shows_light &= above >= test.min_lit_pixels;
@@ -483,7 +483,9 @@ impl Session<'_> {
                     .step(&format!("light {ch} ({light_name}): {name} alone"));
                 let mut look = Look::off(self.scene.lights.len());
                 look.levels[l] = WHITE;
-                let merged = self.shoot_look(&look, Some((l, k)), false)?;
+                let frame = self.patch.emitter_alone(&look, l, k);
+                let dmx = self.dmx_of(l, &frame);
+                let merged = self.shoot_look(&look, frame, false)?;
                 if merged.clipped_everywhere > 0 {
                     self.progress.warn(&format!(
                         "light {ch} ({light_name}) {name}: {} pixels are clipped even at the shortest exposure: close the aperture or lower the ISO",
@@ -493,7 +495,6 @@ impl Session<'_> {
                 let image = visobjd_hdr::subtract_ambient(&merged.radiance, ambient)?;
                 visobjd_hdr::write_exr(&path, &image)?;
                 sums.push((name.clone(), radiance_sum(&image.pixels)));
-                let dmx = self.dmx_of(l, &self.patch.emitter_alone(&look, l, k));
                 self.record.emitters.entry(ch).or_default().insert(
                     name.clone(),
                     LightRecord {
@@ -533,26 +534,20 @@ impl Session<'_> {
             });
         }
         self.progress.step("ambient light: everything at 0");
+        let off = Look::off(self.scene.lights.len());
         let a = self
-            .shoot_look(&Look::off(self.scene.lights.len()), None, true)?
+            .shoot_look(&off, self.patch.unmastered(&off), true)?
             .radiance;
         visobjd_hdr::write_exr(&path, &a)?;
         Ok(a)
     }
 
-    /// Puts `look` on the rig (with `alone`'s light and emitter alone, see
-    /// [`Patch::emitter_alone`]) and waits for the lamps and for frames that carry it.
-    fn show(&mut self, look: &Look, alone: Option<(usize, usize)>) -> Result<(), CaptureError> {
+    /// Puts `look` on the rig as the slot levels `frame` (its [`Patch::unmastered`], or a
+    /// light's emitter alone: [`Patch::emitter_alone`]) and waits for the lamps and for
+    /// frames that carry it.
+    fn show(&mut self, look: &Look, frame: Frame) -> Result<(), CaptureError> {
         let started = Instant::now();
-        match alone {
-            Some((l, k)) => self
-                .output
-                .set_frame(look.clone(), self.patch.emitter_alone(look, l, k)),
-            // Through the session's patch, so the colour validation can send its levels.
-            None => self
-                .output
-                .set_frame(look.clone(), self.patch.unmastered(look)),
-        }
+        self.output.set_frame(look.clone(), frame);
         let ticks = self.output.stats().ticks;
         std::thread::sleep(self.opts.settle);
         let deadline = Instant::now() + Duration::from_secs(5);
@@ -674,10 +669,10 @@ impl Session<'_> {
     fn shoot_look(
         &mut self,
         look: &Look,
-        alone: Option<(usize, usize)>,
+        frame: Frame,
         dark: bool,
     ) -> Result<visobjd_hdr::Merged, CaptureError> {
-        self.show(look, alone)?;
+        self.show(look, frame)?;
         let response = self.record.response.clone();
         let (meter, t) = self.meter()?;
         let mut times = if dark || meter.high() < METERED {
@@ -773,7 +768,7 @@ impl Session<'_> {
                     "the basis images differ in size: capture them again together".into(),
                 ));
             }
-            let m = ColourModel::new(self.scene.profile(l)).multiplier(lv);
+            let m = self.scene.colour_model(l).multiplier(lv);
             for (o, p) in c.pixels.iter_mut().zip(&img.pixels) {
                 for k in 0..3 {
                     o[k] += m[k] * p[k];
@@ -783,7 +778,9 @@ impl Session<'_> {
         let Some(composite) = composite else {
             return Ok(None);
         };
-        let shot = self.shoot_look(&look, None, false)?.radiance;
+        let shot = self
+            .shoot_look(&look, self.patch.unmastered(&look), false)?
+            .radiance;
         let shot = visobjd_hdr::subtract_ambient(&shot, ambient)?;
         Ok(relative_error(&shot, &composite))
     }
@@ -840,10 +837,10 @@ impl Session<'_> {
         // The same images without their emitters': each light from its white image.
         basis.emitter_images.fill(None);
         let white_only = visobjd_compositor::render::render_reference(&basis, &part_look, 1.0);
-        let patch = std::mem::replace(&mut self.patch, Patch::new(&scene));
-        let shot = self.shoot_look(&look, None, false);
-        self.patch = patch;
-        let shot = visobjd_hdr::subtract_ambient(&shot?.radiance, ambient)?;
+        // Solved through the profiles' emitters, as previewed.
+        let frame = Patch::new(&scene).unmastered(&look);
+        let shot = self.shoot_look(&look, frame, false)?;
+        let shot = visobjd_hdr::subtract_ambient(&shot.radiance, ambient)?;
         Ok(colour_difference(&shot, &per_emitter)
             .zip(colour_difference(&shot, &white_only))
             .map(|(per_emitter, white_only)| ColourValidation {
