@@ -152,23 +152,15 @@ impl Cmd {
                 Edit::Color { id, k, rgb } => {
                     let (i, id) = find(s, id)?;
                     let colors = &mut s.objectives[i].objective.analysis.palette;
-                    let n = colors.len();
-                    let c = colors.get_mut(k - 1).ok_or_else(|| {
-                        format!("objective {id} has no palette colour {k} (colours 1-{n})")
-                    })?;
-                    c.color = rgb;
+                    let c = colour_index(colors, id, k)?;
+                    colors[c].color = rgb;
                     Outcome::reply(palette(id, &s.objectives[i].objective)).saved()
                 }
                 Edit::Weight { id, k, w } => {
                     let (i, id) = find(s, id)?;
                     let colors = &mut s.objectives[i].objective.analysis.palette;
-                    let n = colors.len();
-                    if k > n {
-                        return Err(format!(
-                            "objective {id} has no palette colour {k} (colours 1-{n})"
-                        ));
-                    }
-                    reweigh(colors, k - 1, w)?;
+                    let c = colour_index(colors, id, k)?;
+                    reweigh(colors, c, w)?;
                     Outcome::reply(palette(id, &s.objectives[i].objective)).saved()
                 }
                 Edit::Remove { id } => {
@@ -273,6 +265,19 @@ fn region_reply(id: u32, region: Region, footprints: &Footprints) -> OscMessage 
             int(lights),
         ],
     )
+}
+
+/// Palette colour `k` (1-based, as OSC numbers them) of objective `id`, as an index.
+fn colour_index(
+    colors: &[visobjd_method::objective::PaletteColor],
+    id: u32,
+    k: usize,
+) -> Result<usize, String> {
+    let n = colors.len();
+    (1..=n)
+        .contains(&k)
+        .then(|| k - 1)
+        .ok_or_else(|| format!("objective {id} has no palette colour {k} (colours 1-{n})"))
 }
 
 fn palette(id: u32, o: &Objective) -> OscMessage {
