@@ -911,8 +911,9 @@ async fn reference_picture(sh: &Shared, name: String) -> Response {
     if let Some(pic) = cached(&sh.files, &key).await {
         return jpeg(pic);
     }
+    let engine = Arc::clone(&sh.engine);
     let decoded = blocking(move || {
-        visobjd_method::objective::decode_reference(&path).map(|img| {
+        engine.decode_reference(&path).map(|img| {
             let (w, h) = img.dimensions();
             let img = if w > REFERENCE_WIDTH {
                 let h = (u64::from(h) * u64::from(REFERENCE_WIDTH) / u64::from(w)).max(1) as u32;

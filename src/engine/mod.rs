@@ -537,9 +537,10 @@ impl Engine {
         name: &str,
         aspects: visobjd_method::objective::Aspects,
     ) -> Result<Objective, String> {
-        let _one_at_a_time = self.reading.lock().unwrap_or_else(|p| p.into_inner());
         let path = resolve_reference(&self.references, name)?;
-        let img = decode_reference(&path).map_err(|e| format!("{name} {e}"))?;
+        let img = self
+            .decode_reference(&path)
+            .map_err(|e| format!("{name} {e}"))?;
         Ok(Objective {
             image: name.to_string(),
             aspects,
@@ -550,6 +551,14 @@ impl Engine {
                 self.palette_size,
             ),
         })
+    }
+
+    /// Decodes the reference image at `path` (resolved in the references folder), one at a
+    /// time: a big image takes hundreds of MB while it decodes, and a page asks for every
+    /// reference's picture at once.
+    pub fn decode_reference(&self, path: &Path) -> Result<image::RgbImage, String> {
+        let _one_at_a_time = self.reading.lock().unwrap_or_else(|p| p.into_inner());
+        decode_reference(path)
     }
 
     /// Starts a generate on its own thread, with `seed` or the session's seed setting; the
