@@ -922,9 +922,11 @@ fn measure_emitters(sums: &[(String, [f64; 3])]) -> BTreeMap<String, MeasuredEmi
         .zip(&xyz)
         .map(|((name, _), v)| {
             let all = v[0] + v[1] + v[2];
-            let (x, y, flux) = (v[0] / all, v[1] / all, v[1] / total);
-            let ok = [x, y, flux].iter().all(|c| c.is_finite() && *c > 0.0) && x + y < 1.0;
-            ok.then(|| (name.clone(), MeasuredEmitter { xy: [x, y], flux }))
+            let m = MeasuredEmitter {
+                xy: [v[0] / all, v[1] / all],
+                flux: v[1] / total,
+            };
+            m.fault().is_none().then(|| (name.clone(), m))
         })
         .collect();
     measured.unwrap_or_default()

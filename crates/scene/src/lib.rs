@@ -130,6 +130,28 @@ pub struct MeasuredEmitter {
     pub flux: f64,
 }
 
+impl MeasuredEmitter {
+    /// Why it is not a measurement of a real emitter (`None` when it is): an xy of a real
+    /// colour (0 < x, 0 < y, x + y < 1) and a finite positive flux. Capture records only
+    /// measurements that pass, and loading refuses the others.
+    pub fn fault(&self) -> Option<String> {
+        let [x, y] = self.xy;
+        let xy_ok = x.is_finite() && y.is_finite() && x > 0.0 && y > 0.0 && x + y < 1.0;
+        if !xy_ok {
+            return Some(format!(
+                "xy [{x}, {y}] is not a colour (need 0 < x, 0 < y, x + y < 1)"
+            ));
+        }
+        (!(self.flux.is_finite() && self.flux > 0.0))
+            .then(|| format!("flux {} must be a positive number", self.flux))
+    }
+
+    /// CIE XYZ at full.
+    pub fn xyz(&self) -> [f64; 3] {
+        crate::emitter::colour::xyy_to_xyz(self.xy[0], self.xy[1], self.flux)
+    }
+}
+
 impl SceneFile {
     /// Parses scene.toml text without validating it (`path` names the file in errors).
     pub fn parse(path: &Path, text: &str) -> Result<SceneFile, SceneError> {
@@ -516,27 +538,12 @@ fn emitter_basis<'a>(l: &'a LightFile, profile: &Profile) -> Result<Vec<&'a Path
 fn emitter_measured(l: &LightFile, profile: &Profile) -> Result<Vec<[f64; 3]>, String> {
     per_emitter(l, profile, "emitter_measured", &l.emitter_measured)?
         .into_iter()
-        .map(|(n, m)| {
-            let [x, y] = m.xy;
-            let xy_ok = x.is_finite() && y.is_finite() && x > 0.0 && y > 0.0 && x + y < 1.0;
-            if !xy_ok {
-                return Err(format!(
-                    "light {}: emitter_measured `{n}` xy [{x}, {y}] is not a colour (need 0 < x, 0 < y, x + y < 1)",
-                    l.channel
-                ));
-            }
-            if !(m.flux.is_finite() && m.flux > 0.0) {
-                return Err(format!(
-                    "light {}: emitter_measured `{n}` flux {} must be a positive number",
-                    l.channel, m.flux
-                ));
-            }
-            Ok(crate::profile::Emitter {
-                name: n.to_string(),
-                xy: m.xy,
-                flux: m.flux,
-            }
-            .xyz())
+        .map(|(n, m)| match m.fault() {
+            Some(fault) => Err(format!(
+                "light {}: emitter_measured `{n}` {fault}",
+                l.channel
+            )),
+            None => Ok(m.xyz()),
         })
         .collect()
 }

@@ -107,9 +107,7 @@ pub struct Emitter {
 impl Emitter {
     /// CIE XYZ at full: `Y = flux`, `X = x / y * Y`, `Z = (1 - x - y) / y * Y`.
     pub fn xyz(&self) -> [f64; 3] {
-        let [x, y] = self.xy;
-        let big_y = self.flux;
-        [x / y * big_y, big_y, (1.0 - x - y) / y * big_y]
+        crate::emitter::colour::xyy_to_xyz(self.xy[0], self.xy[1], self.flux)
     }
 }
 
