@@ -80,11 +80,11 @@ impl EosConfig {
                 self.user
             ));
         }
-        self.console().map(drop)
+        self.target().map(drop)
     }
 
-    /// The console's address, None when export is off; Err names the bad value.
-    pub fn console(&self) -> Result<Option<SocketAddr>, String> {
+    /// The Eos console's address, None when export is off; Err names the bad value.
+    pub fn target(&self) -> Result<Option<SocketAddr>, String> {
         if self.address.trim().is_empty() {
             return Ok(None);
         }

@@ -1,9 +1,12 @@
 //! visobjd: turns a lighting designer's reference images into stage lighting looks.
 //!
-//! This crate is the daemon and its command line: OSC in ([`osc`]), commands parsed once
-//! ([`cmd`]), the session they change ([`engine`]), the web page ([`http`]), the Eos
-//! export ([`eos`]). The method, the compositor, DMX, the scene model, durable files and the
-//! virtual stage are crates of their own (`crates/`; see `docs/architecture.md`).
+//! This crate is the daemon and its command line. Calls go one way, down: the transports
+//! (OSC in [`osc`], the web page in [`http`], a backup's link to its main in [`backup`]) hand
+//! each message to the commands ([`cmd`]: parsed once, one file per address family), which
+//! change the session through the [`engine`]; the engine drives the method, the compositor
+//! and DMX, which are crates of their own (`crates/`). [`config`] and [`eos`] (the commands an
+//! Eos console takes) sit below whoever reads them; [`shutdown`] and [`cli`] wire it all.
+//! `docs/architecture.md` draws it.
 
 pub mod backup;
 pub mod cli;

@@ -2,45 +2,15 @@
 //! messages (OSC, the web page) and stops pinging the watchdog, lets the work already
 //! started finish (generates, Eos exports), then stops the output (three sACN
 //! Stream_Terminated packets per universe, so receivers release at once) and writes the
-//! state still queued (the last fader move survives a clean stop). Every OS thread the
-//! daemon starts for a command is registered in [`Threads`] and joined here; the runtime's
-//! tasks are aborted and awaited.
-
-use std::sync::Mutex;
-use std::thread::JoinHandle;
+//! state still queued (the last fader move survives a clean stop). The engine joins the OS
+//! threads it started for commands ([`Engine::shutdown`]); the runtime's tasks are aborted
+//! and awaited.
 
 use anyhow::Context;
 
 use crate::engine::Engine;
 use crate::http::Http;
 use crate::osc::Server;
-
-/// The OS threads started for commands (generates, Eos exports), so shutdown can join the
-/// ones still running; finished ones are let go as new ones start.
-#[derive(Debug, Default)]
-pub struct Threads(Mutex<Vec<JoinHandle<()>>>);
-
-impl Threads {
-    /// Starts `work` on a thread called `name` and keeps its handle.
-    pub fn spawn(&self, name: &str, work: impl FnOnce() + Send + 'static) -> std::io::Result<()> {
-        let handle = std::thread::Builder::new().name(name.into()).spawn(work)?;
-        let mut running = self.0.lock().unwrap_or_else(|p| p.into_inner());
-        running.retain(|h| !h.is_finished());
-        running.push(handle);
-        Ok(())
-    }
-
-    /// Waits for every thread still running.
-    pub fn join(&self) {
-        let running = std::mem::take(&mut *self.0.lock().unwrap_or_else(|p| p.into_inner()));
-        for handle in running {
-            let name = handle.thread().name().unwrap_or("?").to_string();
-            if handle.join().is_err() {
-                tracing::error!("the {name} thread panicked before shutdown");
-            }
-        }
-    }
-}
 
 /// Waits for SIGTERM or SIGINT.
 pub async fn signalled() -> anyhow::Result<()> {

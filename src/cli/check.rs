@@ -146,7 +146,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     line(
         "eos",
-        match config.eos.console() {
+        match config.eos.target() {
             Ok(Some(addr)) => format!(
                 "presets to {addr} over {} as user {}",
                 match config.eos.protocol {

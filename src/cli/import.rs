@@ -46,8 +46,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if !(args.timeout.is_finite() && (0.1..=600.0).contains(&args.timeout)) {
         bail!("--timeout must be 0.1..=600 seconds, got {}", args.timeout);
     }
-    if let Some(console) = eos::target(&args.source) {
-        let (addr, framing) = console?;
+    if let Some(eos) = eos::target(&args.source) {
+        let (addr, framing) = eos?;
         let Some(out) = &args.out else {
             bail!(
                 "{}: an Eos patch becomes a scene: give --out SCENE_DIR",

@@ -10,10 +10,11 @@ use std::sync::Arc;
 
 use anyhow::Context;
 
+use crate::cmd::Runner;
 use crate::config::Config;
+use crate::engine::Engine;
 use crate::engine::persist::{Files, restore_live};
 use crate::engine::session::Session;
-use crate::engine::{Engine, EngineHandler};
 use crate::osc::Server;
 use visobjd_dmx::Patch;
 use visobjd_dmx::{Input, Output};
@@ -105,7 +106,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 /// Pings systemd's watchdog at half its period, but only while the DMX clock has ticked
 /// since the last ping: a stalled or dead clock (a dark stage) and a wedged runtime (OSC
 /// gone) both stop the pings, and systemd restarts the daemon.
-async fn watchdog(engine: Arc<crate::engine::Engine>, period: std::time::Duration) {
+async fn watchdog(engine: Arc<Engine>, period: std::time::Duration) {
     let mut tick = tokio::time::interval(period / 2);
     let mut last = None;
     loop {
@@ -124,10 +125,11 @@ async fn watchdog(engine: Arc<crate::engine::Engine>, period: std::time::Duratio
 }
 
 async fn serve(config: &Config, engine: &Arc<Engine>) -> anyhow::Result<()> {
-    let server = Server::start(&config.osc, Arc::new(EngineHandler(Arc::clone(engine))))
-        .map_err(anyhow::Error::msg)?;
+    let runner = Runner::new(Arc::clone(engine));
+    let server =
+        Server::start(&config.osc, Arc::new(runner.clone())).map_err(anyhow::Error::msg)?;
     if let Some(sender) = server.sender() {
-        engine.set_push(sender);
+        engine.set_pusher(sender);
     }
     let http = if config.http.listen.is_empty() {
         None
@@ -140,6 +142,7 @@ async fn serve(config: &Config, engine: &Arc<Engine>) -> anyhow::Result<()> {
                 hosts: config.http.hosts.clone(),
             },
             Arc::clone(engine),
+            runner.clone(),
         )
         .await
         .map_err(anyhow::Error::msg)?;
@@ -149,10 +152,7 @@ async fn serve(config: &Config, engine: &Arc<Engine>) -> anyhow::Result<()> {
     let _ = sd_notify::notify(&[sd_notify::NotifyState::Ready]);
     let mut tasks = Vec::new();
     if let Some(changes) = engine.console_changes() {
-        tasks.push(tokio::spawn(crate::cmd::follow_console(
-            Arc::clone(engine),
-            changes,
-        )));
+        tasks.push(tokio::spawn(Arc::clone(engine).follow_console(changes)));
     }
     if let Some(backup) = &config.backup {
         tracing::info!(
@@ -166,8 +166,8 @@ async fn serve(config: &Config, engine: &Arc<Engine>) -> anyhow::Result<()> {
                 .collect::<Vec<_>>()
                 .join(", ")
         );
-        tasks.push(tokio::spawn(crate::backup::mirror(
-            Arc::clone(engine),
+        tasks.push(tokio::spawn(crate::backup::follow_main(
+            runner.clone(),
             backup.main.trim().to_string(),
         )));
     }

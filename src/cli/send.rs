@@ -199,7 +199,7 @@ mod tests {
     #[test]
     fn replies_print_as_one_line() {
         let m = OscMessage {
-            addr: "/vo/error".into(),
+            addr: crate::osc::ERROR.into(),
             args: vec![
                 OscType::String("/vo/pick".into()),
                 OscType::String("no gallery yet".into()),

@@ -1,20 +1,21 @@
 //! `/vo/backup/subscribe` (a backup asks its main for the state and the commands it
 //! accepts), `/vo/backup/state` (the state, applied by a backup) and `/vo/backup/gallery`
-//! (a gallery the main's generate installed, applied by a backup). See src/backup.rs.
+//! (a gallery the main's generate installed, applied by a backup). The main's side is
+//! src/engine/backups.rs, the backup's connection src/backup.rs.
 
 use std::sync::Arc;
 
 use rosc::OscMessage;
 
-use crate::engine::Engine;
-use crate::osc::Peer;
-use crate::osc::args;
-use crate::osc::args::Request;
+use super::Context;
+use crate::engine::{Engine, Refusal};
+use crate::osc::Transport;
+use crate::osc::args::{self, Request};
 
 pub enum Cmd {
     Subscribe,
     /// The main's `session.json`, `live.json`, `looks.json` and what its session holds
-    /// besides (gallery, history, console selection), as JSON text.
+    /// besides (gallery, history, Eos selection), as JSON text.
     State([String; 4]),
     /// The gallery a generate installed on the main, as JSON text.
     Gallery(String),
@@ -44,23 +45,27 @@ impl Cmd {
         !matches!(self, Cmd::Subscribe)
     }
 
-    pub fn apply(self, e: &Arc<Engine>, peer: &Peer) -> Result<Vec<OscMessage>, String> {
+    pub fn apply(self, cx: &Context) -> Result<Vec<OscMessage>, Refusal> {
+        let e = cx.engine;
         match self {
             Cmd::Subscribe => {
-                e.attach_backup(peer)?;
-                Ok(Vec::new())
+                if cx.peer.transport() == Transport::Udp {
+                    return Err(Refusal::input(
+                        "a backup subscribes over TCP (osc.tcp): it needs every command, in order",
+                    ));
+                }
+                e.attach_backup(Arc::new(cx.peer.clone()))?;
             }
             Cmd::State(parts) => {
                 only_a_backup(e, "state")?;
                 e.install_state(&parts)?;
-                Ok(Vec::new())
             }
             Cmd::Gallery(text) => {
                 only_a_backup(e, "gallery")?;
-                e.install_gallery(&text)?;
-                Ok(Vec::new())
+                e.take_gallery(&text)?;
             }
         }
+        Ok(Vec::new())
     }
 }
 
@@ -69,13 +74,13 @@ fn part(req: &Request, i: usize, what: &str) -> Result<String, String> {
     Ok(args::string(args::required(&req.args, i, what)?, what)?.to_string())
 }
 
-/// Err unless this daemon is a backup (which takes `what` only from its main: `cmd::run`
-/// refuses changes from anyone else).
-fn only_a_backup(e: &Engine, what: &str) -> Result<(), String> {
+/// Err unless this daemon is a backup (which takes `what` only from its main:
+/// [`super::Runner::run`] refuses changes from anyone else).
+fn only_a_backup(e: &Engine, what: &str) -> Result<(), Refusal> {
     match e.main() {
         Some(_) => Ok(()),
-        None => Err(format!(
+        None => Err(Refusal::conflict(format!(
             "only a backup takes a {what}, from its main: this daemon has no [backup]"
-        )),
+        ))),
     }
 }

@@ -3,14 +3,12 @@
 //! saturation ranges and exclusions of groups and lights, pins (`/vo/pin/add`,
 //! `/vo/pin/<id>/remove`, `/vo/pins`) and the listing of them all (`/vo/constraints`).
 
-use std::sync::Arc;
-
 use rosc::{OscMessage, OscType};
 
-use super::{group, int, light, num_arg, switch_arg, text};
+use super::{Context, Named, group, int, light, num_arg, switch_arg, text};
 use crate::engine::rules::{Exclude, MAX_RATIO, Pin, check_saturation};
 use crate::engine::session::Session;
-use crate::engine::{Engine, Outcome, msg};
+use crate::engine::{Outcome, Refusal, msg};
 use crate::osc::args::{self, Request};
 use visobjd_method::constrain::Saturation;
 use visobjd_method::objective::Region;
@@ -18,12 +16,6 @@ use visobjd_scene::Scene;
 
 /// Pins kept at most: each is a few bytes, but a flood must not grow the state file.
 const MAX_PINS: usize = 64;
-
-/// A group or a light, named as the address names it.
-pub enum Target {
-    Group(String),
-    Light(String),
-}
 
 pub enum Cmd {
     GroupKey {
@@ -44,11 +36,11 @@ pub enum Cmd {
         ratio: f32,
     },
     Saturation {
-        target: Target,
+        target: Named,
         range: Saturation,
     },
     Exclude {
-        target: Target,
+        target: Named,
         mode: Exclude,
     },
     PinAdd(Region),
@@ -89,8 +81,8 @@ impl Cmd {
             }));
         }
         let target = |kind: &str, seg: &str| match kind {
-            "group" => Target::Group(seg.to_string()),
-            _ => Target::Light(seg.to_string()),
+            "group" => Named::Group(seg.to_string()),
+            _ => Named::Light(seg.to_string()),
         };
         for kind in ["group", "light"] {
             if let Some(c) = req.matches(&format!("/vo/{kind}/*/saturation")) {
@@ -134,9 +126,9 @@ impl Cmd {
         }))
     }
 
-    pub fn apply(self, e: &Arc<Engine>) -> Result<Vec<OscMessage>, String> {
-        let scene = &e.stage.scene;
-        e.commit(|s| {
+    pub fn apply(self, cx: &Context) -> Result<Vec<OscMessage>, Refusal> {
+        let scene = cx.scene();
+        cx.commit(|s| {
             let reply = match self {
                 Cmd::GroupKey { name, on } => {
                     let g = group(scene, &name)?;
@@ -164,7 +156,9 @@ impl Cmd {
                 }
                 Cmd::Ratio { name, of, ratio } => {
                     let (b, a) = (group(scene, &name)?, group(scene, &of)?);
-                    s.rules.set_ratio(scene, b, a, ratio)?;
+                    s.rules
+                        .set_ratio(scene, b, a, ratio)
+                        .map_err(Refusal::conflict)?;
                     msg(
                         "/vo/group/ratio",
                         vec![
@@ -176,26 +170,26 @@ impl Cmd {
                 }
                 Cmd::Saturation { target, range } => {
                     let (slot, who) = match &target {
-                        Target::Group(name) => {
+                        Named::Group(name) => {
                             let g = group(scene, name)?;
                             if !scene.groups[g].lights.iter().any(|&l| has_colour(scene, l)) {
-                                return Err(format!(
+                                return Err(Refusal::conflict(format!(
                                     "group `{name}` has no light with colour, so no saturation"
-                                ));
+                                )));
                             }
                             (
                                 &mut s.rules.group_saturation[g],
                                 text(&scene.groups[g].name),
                             )
                         }
-                        Target::Light(ch) => {
+                        Named::Light(ch) => {
                             let l = light(scene, ch)?;
                             if !has_colour(scene, l) {
-                                return Err(format!(
+                                return Err(Refusal::conflict(format!(
                                     "light {} is a `{}` and has no colour, so no saturation",
                                     scene.lights[l].channel,
                                     scene.profile(l).name
-                                ));
+                                )));
                             }
                             (
                                 &mut s.rules.light_saturation[l],
@@ -205,44 +199,44 @@ impl Cmd {
                     };
                     *slot = range;
                     msg(
-                        &format!("/vo/{}/saturation", kind(&target)),
+                        &format!("/vo/{}/saturation", target.kind()),
                         vec![who, OscType::Float(range.min), OscType::Float(range.max)],
                     )
                 }
                 Cmd::Exclude { target, mode } => {
                     let who = match &target {
-                        Target::Group(name) => {
+                        Named::Group(name) => {
                             let g = group(scene, name)?;
                             s.rules.group_exclude[g] = mode;
                             text(&scene.groups[g].name)
                         }
-                        Target::Light(ch) => {
+                        Named::Light(ch) => {
                             let l = light(scene, ch)?;
                             s.rules.light_exclude[l] = mode;
                             int(scene.lights[l].channel as usize)
                         }
                     };
                     msg(
-                        &format!("/vo/{}/exclude", kind(&target)),
+                        &format!("/vo/{}/exclude", target.kind()),
                         vec![who, text(mode.name())],
                     )
                 }
                 Cmd::PinAdd(region) => {
                     if s.rules.pins.len() >= MAX_PINS {
-                        return Err(format!(
+                        return Err(Refusal::conflict(format!(
                             "there are already {MAX_PINS} pins: remove one with /vo/pin/<id>/remove"
-                        ));
+                        )));
                     }
-                    let lights: Vec<usize> = (e.stage.footprints.select(region).iter())
+                    let lights: Vec<usize> = (cx.engine.stage.footprints.select(region).iter())
                         .enumerate()
                         .filter(|(_, on)| **on)
                         .map(|(l, _)| l)
                         .collect();
                     if lights.is_empty() {
-                        return Err(format!(
+                        return Err(Refusal::conflict(format!(
                             "region {} {} {} {} selects no light: there is nothing to pin",
                             region.x0, region.y0, region.x1, region.y1
-                        ));
+                        )));
                     }
                     let id = s.rules.next_pin;
                     s.rules.next_pin += 1;
@@ -258,7 +252,7 @@ impl Cmd {
                         .ok()
                         .and_then(|id| s.rules.pins.iter().position(|p| p.id == id))
                         .ok_or_else(|| {
-                            format!(
+                            Refusal::conflict(format!(
                                 "pin {id} does not exist (pins: {})",
                                 match s.rules.pins.is_empty() {
                                     true => "none".to_string(),
@@ -270,7 +264,7 @@ impl Cmd {
                                         .collect::<Vec<_>>()
                                         .join(", "),
                                 }
-                            )
+                            ))
                         })?;
                     let pin = s.rules.pins.remove(at);
                     msg("/vo/pin/removed", vec![int(pin.id as usize)])
@@ -294,13 +288,6 @@ impl Cmd {
 
 fn has_colour(scene: &Scene, l: usize) -> bool {
     scene.profile(l).has_colour()
-}
-
-fn kind(t: &Target) -> &'static str {
-    match t {
-        Target::Group(_) => "group",
-        Target::Light(_) => "light",
-    }
 }
 
 /// The channels of lights, as OSC ints.

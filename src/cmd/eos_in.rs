@@ -1,20 +1,19 @@
-//! What an ETC Eos console sends with its OSC TX pointed at visobjd, and the console's
-//! selection: `/eos/out/...` (accepted without a reply; `/eos/out/active/chan` read),
-//! `/vo/console/selection`, `/vo/console/selection/lock`, `/vo/console/selection/key`.
+//! What an ETC Eos console sends with its OSC TX pointed at visobjd, and its selection:
+//! `/eos/out/...` (accepted without a reply; `/eos/out/active/chan` read),
+//! `/vo/console/selection`, `/vo/console/selection/lock`, `/vo/console/selection/key` (the
+//! addresses say "console" for history's sake; the selection is always Eos's).
 //!
 //! Eos sends its implicit output (command line, active channel, wheels, cues, ping...) to
 //! its TX target all the time; none of it asks for an answer, so none gets one, not even
 //! an error. `/eos/out/active/chan` carries the selected channels as text ("12 [100]",
 //! "1-5 [50]", "1 Thru 10", "3 + 7 Source Four LED [62]"): the channels of the scene in it
-//! become the console selection, which the designer can lock or make the key lights of
+//! become the Eos selection, which the designer can lock or make the key lights of
 //! the next generate (the paper's prototype's "Get Eos Selection").
-
-use std::sync::Arc;
 
 use rosc::{OscMessage, OscType};
 
-use super::{int, switch_arg};
-use crate::engine::{Engine, Outcome, msg};
+use super::{Context, int, switch_arg};
+use crate::engine::{Outcome, Refusal, msg};
 use crate::osc::args::Request;
 use visobjd_scene::Scene;
 
@@ -52,20 +51,20 @@ impl Cmd {
         }))
     }
 
-    pub fn apply(self, e: &Arc<Engine>) -> Result<Vec<OscMessage>, String> {
-        let scene = &e.stage.scene;
+    pub fn apply(self, cx: &Context) -> Result<Vec<OscMessage>, Refusal> {
+        let scene = cx.scene();
         match self {
             Cmd::EosOut(None) => Ok(Vec::new()),
             Cmd::EosOut(Some(ranges)) => {
                 let lights = lights_in(scene, &ranges);
-                e.commit(|s| {
-                    s.console_selection = lights;
+                cx.commit(|s| {
+                    s.eos_selection = lights;
                     Ok(Outcome::replies(Vec::new()))
                 })
             }
-            Cmd::Selection => e.commit(|s| {
+            Cmd::Selection => cx.commit(|s| {
                 let channels = s
-                    .console_selection
+                    .eos_selection
                     .iter()
                     .map(|&l| int(scene.lights[l].channel as usize));
                 Ok(Outcome::reply(msg(
@@ -73,8 +72,8 @@ impl Cmd {
                     channels.collect(),
                 )))
             }),
-            Cmd::Lock(on) => e.commit(|s| {
-                let lights = selected(s.console_selection.clone())?;
+            Cmd::Lock(on) => cx.commit(|s| {
+                let lights = selected(s.eos_selection.clone())?;
                 for &l in &lights {
                     s.locked_lights[l] = on;
                 }
@@ -84,8 +83,8 @@ impl Cmd {
                 ))
                 .saved())
             }),
-            Cmd::Key(on) => e.commit(|s| {
-                let lights = selected(s.console_selection.clone())?;
+            Cmd::Key(on) => cx.commit(|s| {
+                let lights = selected(s.eos_selection.clone())?;
                 // Keys are designated per group (the sampler draws one value per group):
                 // the groups of the selected lights.
                 for (g, group) in scene.groups.iter().enumerate() {
@@ -104,13 +103,12 @@ impl Cmd {
 }
 
 /// The selection, or the sentence saying there is none.
-fn selected(lights: Vec<usize>) -> Result<Vec<usize>, String> {
+fn selected(lights: Vec<usize>) -> Result<Vec<usize>, Refusal> {
     if lights.is_empty() {
-        return Err(
-            "the console has no light of the scene selected (visobjd reads the selection from \
-             Eos's /eos/out/active/chan: point the console's OSC TX at visobjd)"
-                .into(),
-        );
+        return Err(Refusal::conflict(
+            "Eos has no light of the scene selected (visobjd reads the selection from Eos's \
+             /eos/out/active/chan: point Eos's OSC TX at visobjd)",
+        ));
     }
     Ok(lights)
 }

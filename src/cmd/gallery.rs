@@ -1,13 +1,11 @@
 //! Picking from the gallery and stepping through the base-look history: `/vo/pick`,
 //! `/vo/next`, `/vo/prev`, `/vo/undo`, `/vo/redo`, `/vo/candidate`, `/vo/gallery`.
 
-use std::sync::Arc;
-
 use rosc::OscMessage;
 
-use super::{int, int_arg, light_args, opt_int_arg};
+use super::{Context, int, int_arg, light_args, opt_int_arg};
 use crate::engine::session::{Change, Session};
-use crate::engine::{Engine, Outcome, gallery_look, msg};
+use crate::engine::{Outcome, Refusal, gallery_sizes, msg};
 use crate::osc::args::Request;
 
 pub enum Cmd {
@@ -65,14 +63,16 @@ impl Cmd {
         }))
     }
 
-    pub fn apply(self, e: &Arc<Engine>) -> Result<Vec<OscMessage>, String> {
-        let scene = &e.stage.scene;
-        e.commit(|s| match self {
+    pub fn apply(self, cx: &Context) -> Result<Vec<OscMessage>, Refusal> {
+        let scene = cx.scene();
+        cx.commit(|s| match self {
             Cmd::Pick { k, m } => pick(s, k, m),
             Cmd::Step { forward } => {
                 let n = s.gallery.as_ref().map_or(0, |g| g.len());
                 if n == 0 {
-                    return Err("there is no gallery yet: send /vo/generate first".into());
+                    return Err(Refusal::conflict(
+                        "there is no gallery yet: send /vo/generate first",
+                    ));
                 }
                 let k = match (s.entry, forward) {
                     (Some((k, _)), true) => k % n + 1,
@@ -89,10 +89,12 @@ impl Cmd {
                     ("redo", "/vo/redone")
                 };
                 let depth = if back { s.undo(steps) } else { s.redo(steps) };
-                let depth = depth.map_err(|there| match there {
-                    0 => format!("nothing to {word}"),
-                    1 => format!("cannot {word} {steps} steps: there is 1 step to {word}"),
-                    n => format!("cannot {word} {steps} steps: there are {n} steps to {word}"),
+                let depth = depth.map_err(|there| {
+                    Refusal::conflict(match there {
+                        0 => format!("nothing to {word}"),
+                        1 => format!("cannot {word} {steps} steps: there is 1 step to {word}"),
+                        n => format!("cannot {word} {steps} steps: there are {n} steps to {word}"),
+                    })
                 })?;
                 Ok(Outcome::reply(msg(addr, vec![int(depth)]))
                     .show_look(s.fade_s)
@@ -100,35 +102,23 @@ impl Cmd {
                     .pushed())
             }
             Cmd::Candidate { k, m } => {
-                let look = gallery_look(s, k, m)?;
+                let look = s.gallery_look(k, m)?;
                 let mut a = vec![int(k), int(m)];
                 a.extend(light_args(scene, &look));
                 Ok(Outcome::reply(msg("/vo/candidate", a)))
             }
-            Cmd::Gallery => Ok(Outcome::reply(sizes(s))),
+            Cmd::Gallery => Ok(Outcome::reply(gallery_sizes(s))),
         })
     }
 }
 
 /// Puts entry `k`, member `m` live with the fade and makes it the base.
-fn pick(s: &mut Session, k: usize, m: usize) -> Result<Outcome, String> {
-    let look = gallery_look(s, k, m)?;
+fn pick(s: &mut Session, k: usize, m: usize) -> Result<Outcome, Refusal> {
+    let look = s.gallery_look(k, m)?;
     s.set_base(look, Change::Step);
     s.entry = Some((k, m));
     Ok(Outcome::reply(msg("/vo/picked", vec![int(k), int(m)]))
         .show_look(s.fade_s)
         .saved()
         .echoed())
-}
-
-/// `/vo/gallery clusters size_1 ... size_c` (just `0` before the first generate).
-pub fn sizes(s: &Session) -> OscMessage {
-    let sizes: Vec<usize> = s
-        .gallery
-        .as_ref()
-        .map(|g| g.generation.entries.iter().map(Vec::len).collect())
-        .unwrap_or_default();
-    let mut a = vec![int(sizes.len())];
-    a.extend(sizes.into_iter().map(int));
-    msg("/vo/gallery", a)
 }

@@ -1,13 +1,10 @@
 //! `/vo/generate`, its settings, and `/vo/explore` (galleries that follow a dragged
 //! region, src/engine/explore.rs).
 
-use std::sync::Arc;
-
 use rosc::OscMessage;
 
-use super::{int, int_arg, switch_arg};
-use crate::engine::{Engine, Outcome, msg};
-use crate::osc::Peer;
+use super::{Context, int, int_arg, switch_arg};
+use crate::engine::{Outcome, Refusal, msg};
 use crate::osc::args::Request;
 
 pub enum Cmd {
@@ -18,11 +15,11 @@ pub enum Cmd {
     Seeded(u64),
     /// `/vo/explore 1|0`: galleries follow the region updates until explore is off.
     Explore(bool),
-    Set(Setting),
+    Set(GenerateSetting),
 }
 
 /// A generation setting, kept in the session.
-pub enum Setting {
+pub enum GenerateSetting {
     Count(u32),
     Clusters(u32),
     Seed(u64),
@@ -37,11 +34,15 @@ impl Cmd {
         } else if req.matches("/vo/explore").is_some() {
             Cmd::Explore(switch_arg(req, "explore")?)
         } else if req.matches("/vo/generate/count").is_some() {
-            Cmd::Set(Setting::Count(int_arg(req, 0, "count", 1, 1000)? as u32))
+            Cmd::Set(GenerateSetting::Count(
+                int_arg(req, 0, "count", 1, 1000)? as u32
+            ))
         } else if req.matches("/vo/generate/clusters").is_some() {
-            Cmd::Set(Setting::Clusters(int_arg(req, 0, "clusters", 1, 64)? as u32))
+            Cmd::Set(GenerateSetting::Clusters(
+                int_arg(req, 0, "clusters", 1, 64)? as u32,
+            ))
         } else if req.matches("/vo/generate/seed").is_some() {
-            Cmd::Set(Setting::Seed(
+            Cmd::Set(GenerateSetting::Seed(
                 int_arg(req, 0, "seed", 0, i64::from(i32::MAX))? as u64,
             ))
         } else {
@@ -49,14 +50,15 @@ impl Cmd {
         }))
     }
 
-    pub fn apply(self, e: &Arc<Engine>, peer: &Peer) -> Result<Vec<OscMessage>, String> {
+    pub fn apply(self, cx: &Context) -> Result<Vec<OscMessage>, Refusal> {
+        let e = cx.engine;
         let setting = match self {
             Cmd::Generate => {
-                e.generate(peer, None)?;
+                e.generate(None, cx.later())?;
                 return Ok(Vec::new());
             }
             Cmd::Seeded(seed) => {
-                e.generate(peer, Some(seed))?;
+                e.generate(Some(seed), cx.later())?;
                 return Ok(Vec::new());
             }
             Cmd::Explore(on) => {
@@ -76,17 +78,17 @@ impl Cmd {
             }
             Cmd::Set(setting) => setting,
         };
-        e.commit(|s| {
+        cx.commit(|s| {
             let reply = match setting {
-                Setting::Count(n) => {
+                GenerateSetting::Count(n) => {
                     s.count = n;
                     msg("/vo/generate/count", vec![int(n as usize)])
                 }
-                Setting::Clusters(c) => {
+                GenerateSetting::Clusters(c) => {
                     s.clusters = c;
                     msg("/vo/generate/clusters", vec![int(c as usize)])
                 }
-                Setting::Seed(seed) => {
+                GenerateSetting::Seed(seed) => {
                     s.seed = seed;
                     msg("/vo/generate/seed", vec![int(seed as usize)])
                 }

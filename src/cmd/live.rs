@@ -1,13 +1,13 @@
 //! The live look by hand: faders for lights and groups (no fade, live and base at once),
 //! `/vo/live`, `/vo/fade`, `/vo/master`, `/vo/blackout`.
 
-use std::sync::Arc;
-
 use rosc::{OscMessage, OscType};
 
-use super::{group, int, light, light_args, num_arg, one_light, rgb_args, switch_arg, text};
+use super::{
+    Context, Named, group, int, light_args, num_arg, one_light, rgb_args, switch_arg, text,
+};
 use crate::engine::session::Change;
-use crate::engine::{Engine, Outcome, msg};
+use crate::engine::{Outcome, Refusal, msg};
 use crate::osc::args::Request;
 
 /// What a fader sets.
@@ -17,14 +17,9 @@ pub enum Set {
     Color([f32; 3]),
 }
 
-/// Which lights a fader moves.
-pub enum Target {
-    Light(String),
-    Group(String),
-}
-
 pub enum Cmd {
-    Fader(Target, Set),
+    /// A light's or a group's fader.
+    Fader(Named, Set),
     Live,
     Fade(f32),
     Master(f32),
@@ -43,10 +38,10 @@ fn set(req: &Request, what: &str) -> Result<Option<Set>, String> {
 impl Cmd {
     pub fn parse(req: &Request) -> Result<Option<Cmd>, String> {
         if let Some(c) = req.matches("/vo/light/*/*") {
-            return Ok(set(req, c[1])?.map(|v| Cmd::Fader(Target::Light(c[0].into()), v)));
+            return Ok(set(req, c[1])?.map(|v| Cmd::Fader(Named::Light(c[0].into()), v)));
         }
         if let Some(c) = req.matches("/vo/group/*/*") {
-            return Ok(set(req, c[1])?.map(|v| Cmd::Fader(Target::Group(c[0].into()), v)));
+            return Ok(set(req, c[1])?.map(|v| Cmd::Fader(Named::Group(c[0].into()), v)));
         }
         Ok(Some(if req.matches("/vo/live").is_some() {
             Cmd::Live
@@ -61,15 +56,12 @@ impl Cmd {
         }))
     }
 
-    pub fn apply(self, e: &Arc<Engine>) -> Result<Vec<OscMessage>, String> {
-        let scene = &e.stage.scene;
-        e.commit(|s| {
+    pub fn apply(self, cx: &Context) -> Result<Vec<OscMessage>, Refusal> {
+        let scene = cx.scene();
+        cx.commit(|s| {
             Ok(match self {
                 Cmd::Fader(target, value) => {
-                    let lights = match &target {
-                        Target::Light(ch) => vec![light(scene, ch)?],
-                        Target::Group(name) => scene.groups[group(scene, name)?].lights.clone(),
-                    };
+                    let lights = target.lights(scene)?;
                     let coloured: Vec<usize> = match value {
                         Set::Color(_) => lights
                             .iter()
@@ -79,16 +71,16 @@ impl Cmd {
                         Set::Intensity(_) => lights.clone(),
                     };
                     if coloured.is_empty() {
-                        return Err(match &target {
-                            Target::Light(_) => format!(
+                        return Err(Refusal::conflict(match &target {
+                            Named::Light(_) => format!(
                                 "light {} is a `{}` and has no colour",
                                 scene.lights[lights[0]].channel,
                                 scene.profile(lights[0]).name
                             ),
-                            Target::Group(name) => {
+                            Named::Group(name) => {
                                 format!("group `{name}` has no light with colour")
                             }
-                        });
+                        }));
                     }
                     let mut look = s.live.clone();
                     for &l in &coloured {
@@ -100,14 +92,14 @@ impl Cmd {
                     s.set_base(look, Change::Fader);
                     s.entry = None;
                     let reply = match target {
-                        Target::Light(_) => {
+                        Named::Light(_) => {
                             let l = coloured[0];
                             msg(
                                 "/vo/light",
                                 one_light(scene.lights[l].channel, &s.live.levels[l]).to_vec(),
                             )
                         }
-                        Target::Group(name) => {
+                        Named::Group(name) => {
                             let g = group(scene, &name)?;
                             msg(
                                 "/vo/group",

@@ -1,13 +1,11 @@
 //! Saved looks: `/vo/look/save`, `/vo/look/recall`, `/vo/look/delete`, `/vo/looks`.
 //! Saved looks are on disk before the reply goes out.
 
-use std::sync::Arc;
-
 use rosc::OscMessage;
 
-use super::{int, int_arg, text};
+use super::{Context, int, int_arg, text};
 use crate::engine::session::{Change, Session};
-use crate::engine::{Engine, Outcome, msg};
+use crate::engine::{Outcome, Refusal, msg};
 use crate::osc::args::{self, Request};
 use visobjd_scene::look::LookFile;
 
@@ -41,21 +39,21 @@ impl Cmd {
         }))
     }
 
-    pub fn apply(self, e: &Arc<Engine>) -> Result<Vec<OscMessage>, String> {
-        let scene = &e.stage.scene;
+    pub fn apply(self, cx: &Context) -> Result<Vec<OscMessage>, Refusal> {
+        let scene = cx.scene();
         match self {
             Cmd::Save { n, label } => {
                 let label = label.unwrap_or_else(|| format!("Look {n}"));
-                e.change_looks(|s, looks| {
+                cx.change_looks(|s, looks| {
                     looks.insert(n, LookFile::from_look(scene, &s.live, &label));
                     Ok(())
                 })
-                .map_err(|err| format!("look {n} was not saved: {err}"))?;
+                .map_err(|err| err.after(&format!("look {n} was not saved")))?;
                 Ok(vec![msg("/vo/look/saved", vec![int(n as usize)])])
             }
-            Cmd::Recall(n) => e.commit(|s| {
+            Cmd::Recall(n) => cx.commit(|s| {
                 let file = s.looks.get(&n).ok_or_else(|| missing(n))?;
-                let look = file.to_look(scene)?;
+                let look = file.to_look(scene).map_err(Refusal::conflict)?;
                 s.set_base(look, Change::Step);
                 s.entry = None;
                 Ok(
@@ -66,11 +64,11 @@ impl Cmd {
                 )
             }),
             Cmd::Delete(n) => {
-                e.change_looks(|_, looks| looks.remove(&n).map(drop).ok_or_else(|| missing(n)))
-                    .map_err(|err| format!("look {n} was not deleted: {err}"))?;
+                cx.change_looks(|_, looks| looks.remove(&n).map(drop).ok_or_else(|| missing(n)))
+                    .map_err(|err| err.after(&format!("look {n} was not deleted")))?;
                 Ok(vec![msg("/vo/look/deleted", vec![int(n as usize)])])
             }
-            Cmd::List => e.commit(|s| Ok(Outcome::replies(list(s)))),
+            Cmd::List => cx.commit(|s| Ok(Outcome::replies(list(s)))),
         }
     }
 }
@@ -86,6 +84,6 @@ pub fn list(s: &Session) -> Vec<OscMessage> {
     out
 }
 
-fn missing(n: u32) -> String {
-    format!("there is no saved look {n}")
+fn missing(n: u32) -> Refusal {
+    Refusal::conflict(format!("there is no saved look {n}"))
 }

@@ -1,9 +1,16 @@
-//! The OSC address space (docs/osc.md) as commands: each family of addresses is one file with
-//! a `Cmd` enum, its `parse` (syntax: types and ranges) and its `apply` (against the
-//! engine: existence, state changes, replies). Adding an address touches its family's
-//! file and one arm here at most.
+//! The OSC address space (docs/osc.md) as commands. Each family of addresses is one file
+//! with a `Cmd` enum, its `parse` (syntax: types and ranges; a failure is a
+//! [`RefusalKind::Input`](crate::engine::RefusalKind)) and its `apply` (against the engine,
+//! through a [`Context`]: existence, state changes, replies). [`Runner`] is the handler the
+//! OSC server and the web page call; it parses a message once into a [`Command`] and
+//! applies it. Calls go one way: transport -> `cmd` -> `engine`; the engine never calls
+//! back.
 //!
-//! A command that fails changes nothing and answers one `/vo/error`.
+//! A new command family is one file plus its arms here: a `Command` variant, one line each
+//! in `Command::parse`, `family`, `apply` and `changes_state`.
+//!
+//! A command that fails changes nothing and is answered with one `/vo/error`
+//! ([`runner::render`]).
 
 mod backup;
 mod console;
@@ -14,15 +21,19 @@ mod generate;
 mod live;
 mod looks;
 mod objective;
+mod runner;
 mod status;
 mod test_hook;
 mod transfer;
+
+pub use runner::Runner;
 
 use std::sync::Arc;
 
 use rosc::{OscMessage, OscType};
 
-use crate::engine::Engine;
+use crate::engine::session::Session;
+use crate::engine::{Engine, Later, Outcome, Refusal};
 use crate::osc::Peer;
 use crate::osc::args::{self, Request};
 use crate::osc::packet::{self, Item, PacketError};
@@ -46,6 +57,7 @@ enum Command {
 }
 
 impl Command {
+    /// The command `req` names; Err is the sentence for `/vo/error` (an input refusal).
     fn parse(req: &Request) -> Result<Command, String> {
         if let Some(c) = backup::Cmd::parse(req)? {
             return Ok(Command::Backup(c));
@@ -84,7 +96,7 @@ impl Command {
             return Ok(Command::Transfer(c));
         }
         Err(format!(
-            "unknown address {}: the addresses are listed in the README's OSC reference",
+            "unknown address {}: the addresses are listed in docs/osc.md",
             req.path()
         ))
     }
@@ -107,25 +119,23 @@ impl Command {
         }
     }
 
-    fn apply(self, e: &Arc<Engine>, peer: &Peer) -> Result<Vec<OscMessage>, String> {
+    fn apply(self, cx: &Context) -> Result<Vec<OscMessage>, Refusal> {
         match self {
-            Command::Backup(c) => c.apply(e, peer),
-            Command::EosIn(c) => c.apply(e),
-            Command::Objective(c) => c.apply(e),
-            Command::Constraint(c) => c.apply(e),
-            Command::Console(c) => c.apply(e),
-            Command::Generate(c) => c.apply(e, peer),
-            Command::Gallery(c) => c.apply(e),
-            Command::Live(c) => c.apply(e),
-            Command::Looks(c) => c.apply(e),
-            Command::Status(c) => c.apply(e, peer),
-            Command::TestHook(c) => c.apply(e),
-            Command::Transfer(c) => c.apply(e),
+            Command::Backup(c) => c.apply(cx),
+            Command::EosIn(c) => c.apply(cx),
+            Command::Objective(c) => c.apply(cx),
+            Command::Constraint(c) => c.apply(cx),
+            Command::Console(c) => c.apply(cx),
+            Command::Generate(c) => c.apply(cx),
+            Command::Gallery(c) => c.apply(cx),
+            Command::Live(c) => c.apply(cx),
+            Command::Looks(c) => c.apply(cx),
+            Command::Status(c) => c.apply(cx),
+            Command::TestHook(c) => c.apply(cx),
+            Command::Transfer(c) => c.apply(cx),
         }
     }
-}
 
-impl Command {
     /// Whether the command changes the session (the objectives, constraints, gallery,
     /// looks or stage): such commands are mirrored to a backup, and a backup refuses them
     /// from anyone but its main. Queries, subscriptions, pings and exports do not.
@@ -148,10 +158,10 @@ impl Command {
         }
     }
 
-    /// Whether the command itself is forwarded to backups once accepted. A generate is
-    /// forwarded by the engine instead, as the gallery it installs (`/vo/backup/gallery`),
-    /// and so are explore galleries (with their regions, src/engine/explore.rs); the
-    /// backup's own messages are not forwarded.
+    /// Whether the command itself is forwarded to backups once the session took it. A
+    /// generate is forwarded by the engine instead, as the gallery it installs
+    /// (`/vo/backup/gallery`), and so are explore galleries (with their regions,
+    /// src/engine/explore.rs); the backup's own messages are not forwarded.
     fn forwarded(&self) -> bool {
         self.changes_state()
             && !matches!(
@@ -163,46 +173,50 @@ impl Command {
     }
 }
 
-pub use console::follow as follow_console;
-pub use gallery::sizes as gallery_sizes;
-
-/// Parses and applies one message: its replies, or the sentence for `/vo/error`. A backup
-/// answers queries but refuses changes: they come from its main.
-pub fn run(e: &Arc<Engine>, req: &Request, peer: &Peer) -> Result<Vec<OscMessage>, String> {
-    let command = Command::parse(req)?;
-    if let Some(main) = e.main()
-        && command.changes_state()
-    {
-        return Err(format!("this is a backup of {main}; send to the main"));
-    }
-    apply(e, command, req, peer)
+/// What a command is applied with, as mini-redis hands its commands the `Db` and the
+/// connection: the engine, the sender (an answer that comes later goes to it), and the
+/// message a backup is forwarded when the session takes the change.
+pub struct Context<'a> {
+    engine: &'a Arc<Engine>,
+    peer: &'a Peer,
+    /// The address as received: a later answer's `/vo/error` names it.
+    addr: &'a str,
+    /// The command as received, if it is mirrored to backups ([`Command::forwarded`]).
+    forward: Option<OscMessage>,
 }
 
-/// Parses and applies one message a backup received from its main (src/backup.rs): the
-/// same path as [`run`], changes allowed.
-pub fn mirror(e: &Arc<Engine>, req: &Request, peer: &Peer) -> Result<Vec<OscMessage>, String> {
-    apply(e, Command::parse(req)?, req, peer)
-}
-
-/// Applies a parsed command; an accepted change is forwarded to the backups (at its
-/// commit, see [`crate::backup::Pending`], or here if no commit took it).
-fn apply(
-    e: &Arc<Engine>,
-    command: Command,
-    req: &Request,
-    peer: &Peer,
-) -> Result<Vec<OscMessage>, String> {
-    let forward = command.forwarded().then(|| OscMessage {
-        addr: req.path(),
-        args: req.args.clone(),
-    });
-    crate::backup::Pending::set(forward);
-    let applied = command.apply(e, peer);
-    let left = crate::backup::Pending::take();
-    if let (Ok(_), Some(m)) = (&applied, left) {
-        e.forward(&m);
+impl Context<'_> {
+    fn scene(&self) -> &Scene {
+        &self.engine.stage.scene
     }
-    applied
+
+    /// [`Engine::commit`], forwarding this command to the backups if the change is taken.
+    fn commit(
+        &self,
+        change: impl FnOnce(&mut Session) -> Result<Outcome, Refusal>,
+    ) -> Result<Vec<OscMessage>, Refusal> {
+        self.engine.commit(self.forward.as_ref(), change)
+    }
+
+    /// [`Engine::change_looks`], forwarding this command to the backups once written.
+    fn change_looks<T>(
+        &self,
+        change: impl FnOnce(
+            &Session,
+            &mut std::collections::BTreeMap<u32, visobjd_scene::look::LookFile>,
+        ) -> Result<T, Refusal>,
+    ) -> Result<T, Refusal> {
+        self.engine.change_looks(self.forward.as_ref(), change)
+    }
+
+    /// Where an answer that comes after the command returned goes: to the sender, rendered
+    /// as a reply is.
+    fn later(&self) -> Later {
+        let (peer, addr) = (self.peer.clone(), self.addr.to_string());
+        Box::new(move |answer| {
+            peer.reply(&runner::render(&addr, &peer, answer));
+        })
+    }
 }
 
 /// Reads one received packet (a datagram or a stream frame) the way the daemon does, up to
@@ -266,24 +280,49 @@ fn switch_arg(req: &Request, what: &str) -> Result<bool, String> {
     args::switch(args::required(&req.args, 0, what)?, what)
 }
 
+/// A group or a light, named as an address names it (`/vo/group/<name>/...`,
+/// `/vo/light/<ch>/...`), resolved against the scene when the command is applied.
+pub enum Named {
+    Group(String),
+    Light(String),
+}
+
+impl Named {
+    /// `group` or `light`, as the address and its reply spell it.
+    fn kind(&self) -> &'static str {
+        match self {
+            Named::Group(_) => "group",
+            Named::Light(_) => "light",
+        }
+    }
+
+    /// The lights it names, as indices (a light: one; a group: its lights).
+    fn lights(&self, scene: &Scene) -> Result<Vec<usize>, Refusal> {
+        Ok(match self {
+            Named::Light(ch) => vec![light(scene, ch)?],
+            Named::Group(name) => scene.groups[group(scene, name)?].lights.clone(),
+        })
+    }
+}
+
 /// The light with channel `segment`, as an index.
-fn light(scene: &Scene, segment: &str) -> Result<usize, String> {
+fn light(scene: &Scene, segment: &str) -> Result<usize, Refusal> {
     segment
         .parse::<u32>()
         .ok()
         .and_then(|ch| scene.light_index(ch))
         .ok_or_else(|| {
-            format!(
+            Refusal::conflict(format!(
                 "light {segment} is not in the scene ({})",
                 scene.channel_range()
-            )
+            ))
         })
 }
 
 /// The group called `name` (case-insensitive), as an index.
-fn group(scene: &Scene, name: &str) -> Result<usize, String> {
+fn group(scene: &Scene, name: &str) -> Result<usize, Refusal> {
     scene.group_index(name).ok_or_else(|| {
-        format!(
+        Refusal::conflict(format!(
             "group `{name}` is not in the scene (groups: {})",
             scene
                 .groups
@@ -291,7 +330,7 @@ fn group(scene: &Scene, name: &str) -> Result<usize, String> {
                 .map(|g| g.name.as_str())
                 .collect::<Vec<_>>()
                 .join(", ")
-        )
+        ))
     })
 }
 

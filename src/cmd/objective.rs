@@ -1,12 +1,10 @@
 //! `/vo/objective/...` and `/vo/objectives`: reference images and what to take from them.
 
-use std::sync::Arc;
-
 use rosc::{OscMessage, OscType};
 
-use super::{int, int_arg, num_arg, rgb_args, text};
+use super::{Context, int, int_arg, num_arg, rgb_args, text};
 use crate::engine::session::{Entry, Session};
-use crate::engine::{Engine, Outcome, msg};
+use crate::engine::{Outcome, Refusal, msg};
 use crate::osc::args::{self, Request};
 use visobjd_method::objective::{Aspects, Objective, Region};
 use visobjd_method::targeting::Footprints;
@@ -113,9 +111,10 @@ impl Cmd {
         })))
     }
 
-    pub fn apply(self, e: &Arc<Engine>) -> Result<Vec<OscMessage>, String> {
+    pub fn apply(self, cx: &Context) -> Result<Vec<OscMessage>, Refusal> {
+        let e = cx.engine;
         let edit = match self {
-            Cmd::Add { image, aspects } => return add(e, &image, aspects),
+            Cmd::Add { image, aspects } => return add(cx, &image, aspects),
             Cmd::Edit(edit) => edit,
         };
         let footprints = &e.stage.footprints;
@@ -123,13 +122,14 @@ impl Cmd {
             && e.exploring()
         {
             // While exploring, the region goes to the explore slot: no disk, no generate
-            // waited for; the session takes it with the gallery drawn from it.
+            // waited for, not forwarded as itself; the session takes it with the gallery
+            // drawn from it.
             let id = find(&e.session(), id)?.1;
             if e.explore_region(id, region) {
                 return Ok(vec![region_reply(id, region, footprints)]);
             }
         }
-        e.commit(|s| {
+        cx.commit(|s| {
             Ok(match edit {
                 Edit::Aspects { id, aspects } => {
                     let (i, id) = find(s, id)?;
@@ -160,7 +160,7 @@ impl Cmd {
                     let (i, id) = find(s, id)?;
                     let colors = &mut s.objectives[i].objective.analysis.palette;
                     let c = colour_index(colors, id, k)?;
-                    reweigh(colors, c, w)?;
+                    reweigh(colors, c, w).map_err(Refusal::conflict)?;
                     Outcome::reply(palette(id, &s.objectives[i].objective)).saved()
                 }
                 Edit::Remove { id } => {
@@ -184,9 +184,9 @@ impl Cmd {
 }
 
 /// `/vo/objective/add`: the reference is read with the session unlocked, then added.
-fn add(e: &Engine, image: &str, aspects: Aspects) -> Result<Vec<OscMessage>, String> {
-    let objective = e.read_objective(image, aspects)?;
-    e.commit(|s| {
+fn add(cx: &Context, image: &str, aspects: Aspects) -> Result<Vec<OscMessage>, Refusal> {
+    let objective = cx.engine.read_objective(image, aspects)?;
+    cx.commit(|s| {
         let id = s.next_id;
         s.next_id += 1;
         let st = objective.analysis.stats;
@@ -230,24 +230,23 @@ pub fn list(s: &Session) -> Vec<OscMessage> {
 }
 
 /// The index and number of the objective `which` names.
-fn find(s: &Session, which: Which) -> Result<(usize, u32), String> {
-    let id =
-        match which {
-            Which::Id(id) => id,
-            Which::Last => s.objectives.last().map(|e| e.id).ok_or(
-                "there are no objectives: add one with /vo/objective/add first".to_string(),
-            )?,
-        };
+fn find(s: &Session, which: Which) -> Result<(usize, u32), Refusal> {
+    let id = match which {
+        Which::Id(id) => id,
+        Which::Last => s.objectives.last().map(|e| e.id).ok_or_else(|| {
+            Refusal::conflict("there are no objectives: add one with /vo/objective/add first")
+        })?,
+    };
     s.objective_index(id).map(|i| (i, id)).ok_or_else(|| {
         let ids: Vec<String> = s.objectives.iter().map(|e| e.id.to_string()).collect();
-        if ids.is_empty() {
+        Refusal::conflict(if ids.is_empty() {
             format!("objective {id} does not exist: there are no objectives")
         } else {
             format!(
                 "objective {id} does not exist (objectives: {})",
                 ids.join(", ")
             )
-        }
+        })
     })
 }
 
@@ -272,12 +271,13 @@ fn colour_index(
     colors: &[visobjd_method::objective::PaletteColor],
     id: u32,
     k: usize,
-) -> Result<usize, String> {
+) -> Result<usize, Refusal> {
     let n = colors.len();
-    (1..=n)
-        .contains(&k)
-        .then(|| k - 1)
-        .ok_or_else(|| format!("objective {id} has no palette colour {k} (colours 1-{n})"))
+    (1..=n).contains(&k).then(|| k - 1).ok_or_else(|| {
+        Refusal::conflict(format!(
+            "objective {id} has no palette colour {k} (colours 1-{n})"
+        ))
+    })
 }
 
 fn palette(id: u32, o: &Objective) -> OscMessage {

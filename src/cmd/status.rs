@@ -1,13 +1,12 @@
 //! `/vo/ping`, `/vo/status`, subscriptions and the console: `/vo/subscribe`,
 //! `/vo/unsubscribe`, `/vo/eos/preset`.
 
-use std::sync::Arc;
+use std::net::SocketAddr;
 
 use rosc::OscMessage;
 
-use super::{int, int_arg, opt_int_arg};
-use crate::engine::{Engine, Outcome, msg};
-use crate::osc::Peer;
+use super::{Context, int, int_arg, opt_int_arg};
+use crate::engine::{Outcome, Refusal, msg};
 use crate::osc::args::Request;
 
 pub enum Cmd {
@@ -36,15 +35,18 @@ impl Cmd {
         }))
     }
 
-    pub fn apply(self, e: &Arc<Engine>, peer: &Peer) -> Result<Vec<OscMessage>, String> {
+    pub fn apply(self, cx: &Context) -> Result<Vec<OscMessage>, Refusal> {
+        let e = cx.engine;
+        let from = cx.peer.addr().ip();
         match self {
             Cmd::Ping(args) => Ok(vec![msg("/vo/pong", args)]),
-            Cmd::Status => e.commit(|s| Ok(Outcome::reply(e.status(s)))),
+            Cmd::Status => cx.commit(|s| Ok(Outcome::reply(e.status(s)))),
             Cmd::Subscribe(port) => {
-                let to = e.subscribe(peer, port);
+                let to = SocketAddr::new(from, port.unwrap_or(cx.peer.reply_addr().port()));
+                e.subscribe(from, to);
                 // The whole state goes where the pushes will go, so a tablet that
                 // listens on another port than it sends from is complete at once.
-                let state = e.commit(|s| {
+                let state = cx.commit(|s| {
                     let mut state = Vec::new();
                     if let Some((k, m)) = s.entry {
                         state.push(msg("/vo/picked", vec![int(k), int(m)]));
@@ -56,18 +58,20 @@ impl Cmd {
                 })?;
                 let subscribed = msg("/vo/subscribed", vec![int(to.port().into())]);
                 if let Err(err) = e.push_to(to, &state) {
-                    e.unsubscribe(peer);
-                    return Err(format!("cannot reach {to} to subscribe it: {err}"));
+                    e.unsubscribe(from);
+                    return Err(Refusal::conflict(format!(
+                        "cannot reach {to} to subscribe it: {err}"
+                    )));
                 }
                 Ok(vec![subscribed])
             }
             Cmd::Unsubscribe => {
-                e.unsubscribe(peer);
+                e.unsubscribe(from);
                 Ok(vec![msg("/vo/unsubscribed", Vec::new())])
             }
             Cmd::EosPreset(n) => {
-                // The reply goes to the peer once the console has the commands.
-                e.eos_preset(n, peer)?;
+                // The answer goes to the sender once the console has the commands.
+                e.eos_preset(n, cx.later())?;
                 Ok(Vec::new())
             }
         }

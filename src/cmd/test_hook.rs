@@ -1,14 +1,11 @@
 //! `/vo/test/stall 0|1`, `/vo/test/panic dmx|generate`, `/vo/test/slow_disk ms`: fault
-//! injection for the tests of
-//! the watchdog and of recovery. Refused unless the daemon was started with
-//! `VISOBJD_TEST_HOOKS` set (see [`crate::engine::TEST_HOOKS`]).
-
-use std::sync::Arc;
+//! injection for the tests of the watchdog and of recovery. Refused unless the daemon was
+//! started with `VISOBJD_TEST_HOOKS` set (see [`crate::engine::TEST_HOOKS`]).
 
 use rosc::OscMessage;
 
-use super::{switch_arg, text};
-use crate::engine::{Engine, TestHook, msg};
+use super::{Context, switch_arg, text};
+use crate::engine::{Refusal, TestHook, msg};
 use crate::osc::args::{self, Request};
 
 pub struct Cmd(TestHook);
@@ -32,8 +29,8 @@ impl Cmd {
         }))
     }
 
-    pub fn apply(self, e: &Arc<Engine>) -> Result<Vec<OscMessage>, String> {
-        e.test_hook(self.0)?;
+    pub fn apply(self, cx: &Context) -> Result<Vec<OscMessage>, Refusal> {
+        cx.engine.test_hook(self.0)?;
         Ok(vec![msg("/vo/test", vec![text(&format!("{:?}", self.0))])])
     }
 }

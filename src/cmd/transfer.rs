@@ -1,13 +1,11 @@
 //! `/vo/transfer k region x0 y0 x1 y1` and `/vo/transfer k group NAME`: the prototype's
 //! "transfer area" and "transfer system", taking part of gallery entry k onto the live look.
 
-use std::sync::Arc;
-
 use rosc::OscMessage;
 
-use super::{group, int, int_arg, num_arg};
+use super::{Context, group, int, int_arg, num_arg};
 use crate::engine::session::Change;
-use crate::engine::{Engine, Outcome, gallery_look, msg};
+use crate::engine::{Outcome, Refusal, msg};
 use crate::osc::args::{self, Request};
 use visobjd_method::constrain::transfer;
 use visobjd_method::objective::Region;
@@ -55,12 +53,12 @@ impl Cmd {
         Ok(Some(Cmd { entry, part }))
     }
 
-    pub fn apply(self, e: &Arc<Engine>) -> Result<Vec<OscMessage>, String> {
-        let scene = &e.stage.scene;
-        e.commit(|s| {
-            let from = gallery_look(s, self.entry, 1)?;
+    pub fn apply(self, cx: &Context) -> Result<Vec<OscMessage>, Refusal> {
+        let scene = cx.scene();
+        cx.commit(|s| {
+            let from = s.gallery_look(self.entry, 1)?;
             let lights = match &self.part {
-                Part::Region(r) => e.stage.footprints.select(*r),
+                Part::Region(r) => cx.engine.stage.footprints.select(*r),
                 Part::Group(name) => {
                     let g = group(scene, name)?;
                     let mut on = vec![false; scene.lights.len()];
@@ -71,7 +69,9 @@ impl Cmd {
                 }
             };
             if !lights.contains(&true) {
-                return Err("the region selects no light: there is nothing to transfer".into());
+                return Err(Refusal::conflict(
+                    "the region selects no light: there is nothing to transfer",
+                ));
             }
             let look = transfer(&s.live, &from, &lights);
             s.set_base(look, Change::Step);

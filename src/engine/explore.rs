@@ -2,7 +2,7 @@
 //! updates as a finger or a mouse drags, then `/vo/explore 0`. One worker thread
 //! regenerates from the latest regions for as long as they change and streams every
 //! gallery to the subscribers (`/vo/generated`, then the tablet feedback, through
-//! [`Engine::notify`]).
+//! [`Engine::install_gallery`]).
 //!
 //! A region update only lands in a latest-value slot (per objective) and wakes the worker:
 //! it never waits for a generate or the disk, and updates that arrive while a gallery is
@@ -21,8 +21,9 @@ use std::time::{Duration, Instant};
 
 use rosc::{OscMessage, OscType};
 
+use super::generate::{Inputs, NO_OBJECTIVES, Running, generated};
 use super::session::Gallery;
-use super::{Engine, Inputs, NO_OBJECTIVES, Running, generated, msg, persist};
+use super::{Engine, Refusal, handover, msg};
 use visobjd_method::gallery::Generation;
 use visobjd_method::objective::Region;
 
@@ -93,10 +94,10 @@ impl Engine {
 
     /// `/vo/explore 1`: starts streaming galleries (the first from the current regions at
     /// once). Returns the seed the drag draws with. Refused without objectives.
-    pub fn explore_start(self: &Arc<Self>) -> Result<u64, String> {
+    pub fn explore_start(self: &Arc<Self>) -> Result<u64, Refusal> {
         let s = self.session();
         if s.objectives.is_empty() {
-            return Err(NO_OBJECTIVES.into());
+            return Err(Refusal::conflict(NO_OBJECTIVES));
         }
         let mut st = self.explore.state();
         if !st.on {
@@ -113,7 +114,7 @@ impl Engine {
                 .spawn("explore", move || engine.explore_worker())
             {
                 st.on = false;
-                return Err(format!("cannot start exploring: {e}"));
+                return Err(Refusal::internal(format!("cannot start exploring: {e}")));
             }
             st.worker = true;
         }
@@ -123,7 +124,7 @@ impl Engine {
 
     /// `/vo/explore 0`: ends the drag once the gallery of the last region is in (waits for
     /// it). Returns the galleries streamed and the seed (0 0 when not exploring).
-    pub fn explore_stop(&self) -> Result<(u64, u64), String> {
+    pub fn explore_stop(&self) -> Result<(u64, u64), Refusal> {
         let mut st = self.explore.state();
         if !st.on && !st.worker {
             return Ok((0, 0));
@@ -134,9 +135,9 @@ impl Engine {
         while st.worker {
             let left = deadline.saturating_duration_since(Instant::now());
             if left.is_zero() {
-                return Err(format!(
+                return Err(Refusal::internal(format!(
                     "explore stopped, but its last gallery took over {FINISH:?}; the gallery shows the last one done"
-                ));
+                )));
             }
             st = (self.explore.changed)
                 .wait_timeout(st, left)
@@ -146,8 +147,9 @@ impl Engine {
         Ok((st.galleries, st.seed))
     }
 
-    /// A region update while exploring: kept in the slot for the next gallery. False when
-    /// explore has ended meanwhile (the caller sets the region as usual).
+    /// A region update while exploring: kept in the slot for the next gallery (backups get
+    /// the regions with the explore galleries, not as commands). False when explore has
+    /// ended meanwhile (the caller sets the region as usual).
     pub fn explore_region(&self, id: u32, region: Region) -> bool {
         let mut st = self.explore.state();
         if !st.on {
@@ -157,8 +159,6 @@ impl Engine {
         st.dirty = true;
         st.last_update = Some(Instant::now());
         self.explore.changed.notify_all();
-        // Not forwarded as itself: backups get the regions with the explore galleries.
-        crate::backup::Pending::take();
         true
     }
 
@@ -175,7 +175,7 @@ impl Engine {
             let Some((regions, seed)) = self.next_job() else {
                 return;
             };
-            let running = Running(&self.generating);
+            let running = Running(&self.generator.generating);
             let Some((inputs, serial)) = self.take_regions(&regions) else {
                 continue;
             };
@@ -186,20 +186,12 @@ impl Engine {
                 continue;
             };
             let reply = generated(&generation, ms, seed);
-            let mut s = self.session();
+            let s = self.session();
             if self.has_backups() {
                 self.explore.unforwarded().get_or_insert_default().gallery =
                     Some((generation.clone(), seed));
             }
-            s.gallery = Some(Gallery {
-                generation,
-                seed,
-                serial,
-            });
-            s.entry = None;
             drop(running);
-            let mut pushes = vec![reply];
-            pushes.extend(self.feedback(&s));
             let done = {
                 let mut st = self.explore.state();
                 st.galleries += 1;
@@ -209,7 +201,12 @@ impl Engine {
                 self.flush_explored();
                 last_backup = Instant::now();
             }
-            self.publish(s, &pushes);
+            let gallery = Gallery {
+                generation,
+                seed,
+                serial,
+            };
+            self.install_gallery(s, gallery, vec![reply]);
         }
     }
 
@@ -221,6 +218,7 @@ impl Engine {
         loop {
             if st.dirty
                 && !self
+                    .generator
                     .generating
                     .swap(true, std::sync::atomic::Ordering::SeqCst)
             {
@@ -275,11 +273,7 @@ impl Engine {
         if !regions.is_empty() {
             self.writer.save(super::Snapshot::of(&self.stage.scene, &s));
         }
-        let serial = self
-            .generates
-            .fetch_add(1, std::sync::atomic::Ordering::SeqCst)
-            + 1;
-        Some((Inputs::of(&self.stage, &s), serial))
+        Some((Inputs::of(&self.stage, &s), self.next_serial()))
     }
 
     /// The messages that bring a backup to the latest explore gallery, once: the regions
@@ -302,7 +296,7 @@ impl Engine {
             })
             .collect();
         if let Some((generation, seed)) = u.gallery {
-            match persist::gallery_json(&self.stage.scene, &generation, seed) {
+            match handover::gallery_json(&self.stage.scene, &generation, seed) {
                 Ok(text) => out.push(msg("/vo/backup/gallery", vec![OscType::String(text)])),
                 Err(e) => tracing::error!(
                     "explore: {e}; the backups may differ from this main until they re-sync"

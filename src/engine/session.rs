@@ -12,6 +12,7 @@ use visobjd_scene::look::{Look, LookFile};
 
 use serde::{Deserialize, Serialize};
 
+use super::Refusal;
 use super::rules::Rules;
 
 /// Base looks kept for undo (docs/osc.md; at least 32 were asked for).
@@ -87,7 +88,7 @@ pub struct Session {
     /// Per light: locked.
     pub locked_lights: Vec<bool>,
     /// The lights an Eos console last reported selected (`/eos/out/active/chan`).
-    pub console_selection: Vec<usize>,
+    pub eos_selection: Vec<usize>,
     /// Ratios, saturation ranges, exclusions and pins.
     pub rules: Rules,
     /// Candidates per generate.
@@ -130,7 +131,7 @@ impl Session {
             key_groups: vec![false; scene.groups.len()],
             locked_groups: vec![false; scene.groups.len()],
             locked_lights: vec![false; lights],
-            console_selection: Vec::new(),
+            eos_selection: Vec::new(),
             rules: Rules::new(scene),
             count,
             clusters,
@@ -258,6 +259,27 @@ impl Session {
     /// The objective with `id`, as an index.
     pub fn objective_index(&self, id: u32) -> Option<usize> {
         self.objectives.iter().position(|e| e.id == id)
+    }
+
+    /// The look of entry `k`, member `m` of the gallery (both 1-based), or why there is
+    /// none.
+    pub fn gallery_look(&self, k: usize, m: usize) -> Result<Look, Refusal> {
+        let g = self
+            .gallery
+            .as_ref()
+            .ok_or_else(|| Refusal::conflict("there is no gallery yet: send /vo/generate first"))?;
+        if k == 0 || k > g.len() {
+            return Err(Refusal::conflict(format!(
+                "entry {k} is not in the gallery (entries 1-{})",
+                g.len()
+            )));
+        }
+        g.candidate(k, m).cloned().ok_or_else(|| {
+            Refusal::conflict(format!(
+                "entry {k} has no member {m} (members 1-{})",
+                g.generation.entries[k - 1].len()
+            ))
+        })
     }
 }
 

@@ -32,7 +32,7 @@ pub const TRIGGERS: &[&str] = &[
     "/vo/pin/*/remove",
 ];
 
-/// A message as the engine dispatches it: the address split into lowercase segments, with
+/// A message as the commands read it: the address split into lowercase segments, with
 /// trailing numeric segments moved to the front of the arguments.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Request {

@@ -1,15 +1,12 @@
-//! OSC transport (docs/osc.md): sockets, framing, the argument rules, and the handler the engine
-//! implements. The address space itself is the engine's.
+//! OSC transport (docs/osc.md): the UDP and TCP listeners with the sender allow-list and
+//! the reply routes (`server`, `peers`), stream framing (`framing`), packet decoding
+//! (`packet`) and the argument rules (`args`). It knows nothing of commands: the server
+//! hands each message, read once into an [`args::Request`], to a [`Handler`]
+//! (`crate::cmd::Runner` in the daemon) with the [`Peer`] it came from, and sends back what
+//! the handler returns; a handler answers later through a clone of the peer.
 //!
-//! Wiring, inside the daemon's tokio runtime:
-//!
-//! ```text
-//! let server = osc::Server::start(&config.osc, Arc::new(engine_handler))?;
-//! let push = server.sender();            // subscriptions: push.send(addr, &msg)
-//! // Handler::handle(req, &peer): the message read once by osc::args::Request::new
-//! //   if let Some(ch) = req.matches("/vo/light/*/level") { ... args::number_in(..) ... }
-//! //   long work: keep peer.clone(), answer later with peer.reply(&[...]).
-//! ```
+//! The codecs (`framing`, `packet`, `args`) are leaves: the backup's link to its main and
+//! the Eos export use them too.
 
 pub mod args;
 pub mod framing;
@@ -18,3 +15,20 @@ pub mod peers;
 pub mod server;
 
 pub use server::{Handler, Limits, Peer, Sender, Server, Transport};
+
+use rosc::{OscMessage, OscType};
+
+/// The address of every error answer.
+pub const ERROR: &str = "/vo/error";
+
+/// `/vo/error <address> <sentence>`: how every refusal and transport error is answered,
+/// naming the address received.
+pub fn error(addr: &str, sentence: &str) -> OscMessage {
+    OscMessage {
+        addr: ERROR.into(),
+        args: vec![
+            OscType::String(addr.to_string()),
+            OscType::String(sentence.to_string()),
+        ],
+    }
+}

@@ -7,7 +7,7 @@
 //! `address:reply_port`. A `tcp` (OSC 1.0, length prefix) or `slip` (OSC 1.1) peer gets
 //! its replies and pushes on the TCP connection it opened to visobjd, if it has one open;
 //! otherwise visobjd opens one to `address:reply_port` on its own task (a few seconds'
-//! timeout, messages queued meanwhile), never holding up the engine, and serves that
+//! timeout, messages queued meanwhile), never holding up the handler, and serves that
 //! connection like any other (what the peer sends on it is heard).
 
 use std::net::{IpAddr, SocketAddr};

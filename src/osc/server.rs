@@ -1,7 +1,7 @@
 //! The OSC listeners: UDP and TCP sockets on the `[osc]` addresses, the sender allow-list,
 //! stream framing, and routing of replies back to whoever asked.
 //!
-//! Everything the engine sees goes through [`Handler`]; everything between the socket and
+//! Everything the commands see goes through [`Handler`]; everything between the socket and
 //! the handler lives here. Limits ([`Limits`]) keep one misbehaving client from costing
 //! others anything: a connection cap, an idle timeout, a frame size limit, a bounded queue
 //! for replies sent after the fact, and a bounded backlog per UDP sender, each sender (and
@@ -28,7 +28,7 @@ use super::packet::{self, Item, PacketError};
 use super::peers::{Route as PeerRoute, Routes};
 use crate::config::{Cidr, OscConfig};
 
-/// What the engine implements to answer OSC.
+/// What answers OSC (in the daemon, `crate::cmd::Runner`).
 ///
 /// Called once per message, in arrival order per sender (bundles flattened, run at once), on
 /// a blocking thread that serves only that sender (a UDP source address or a TCP
@@ -95,7 +95,7 @@ pub enum Transport {
     Tcp(Framing),
 }
 
-/// Who sent a message and the way back to them. Cloneable so the engine can answer long
+/// Who sent a message and the way back to them. Cloneable so a handler can answer long
 /// work later with [`Peer::reply`].
 #[derive(Clone, Debug)]
 pub struct Peer {
@@ -161,7 +161,8 @@ impl Peer {
 #[derive(Clone, Debug)]
 pub struct Sender {
     socket: Arc<UdpSocket>,
-    /// Weak: the handler (the engine) holds a sender, and the server state holds it.
+    /// Weak: the engine holds a sender to push through, and the server state holds the
+    /// handler.
     shared: Weak<Shared>,
 }
 
@@ -552,10 +553,7 @@ impl Shared {
 
 /// `/vo/error <address> <message>` from the transport itself.
 fn transport_error(addr: String, message: String) -> OscMessage {
-    OscMessage {
-        addr: "/vo/error".into(),
-        args: vec![OscType::String(addr), OscType::String(message)],
-    }
+    super::error(&addr, &message)
 }
 
 /// Datagrams waiting per UDP sender, with their total size. A sender is in the map exactly
@@ -1036,10 +1034,7 @@ mod tests {
     #[test]
     fn datagram_replies_are_cut_to_fit() {
         let long = "é".repeat(40_000);
-        let m = OscMessage {
-            addr: "/vo/error".into(),
-            args: vec![OscType::String(long.clone()), OscType::String(long)],
-        };
+        let m = super::super::error(&long, &long);
         let bytes = encode_datagram(&m).unwrap();
         assert!(bytes.len() <= MAX_DATAGRAM, "{}", bytes.len());
         let (_, p) = rosc::decoder::decode_udp(&bytes).unwrap();

@@ -15,9 +15,10 @@ use anyhow::Context;
 use rosc::{OscMessage, OscPacket, OscType};
 
 use super::Row;
+use crate::cmd::Runner;
 use crate::config::Config;
+use crate::engine::Engine;
 use crate::engine::session::Session;
-use crate::engine::{Engine, EngineHandler};
 use crate::osc::Server;
 use visobjd_dmx::{Output, Patch};
 use visobjd_method::stage::Stage;
@@ -159,7 +160,7 @@ impl Client {
                 if m.addr == reply {
                     return Ok(m);
                 }
-                anyhow::ensure!(m.addr != "/vo/error", "{what}: {:?}", m.args);
+                anyhow::ensure!(m.addr != crate::osc::ERROR, "{what}: {:?}", m.args);
             }
         }
     }
@@ -226,12 +227,10 @@ pub fn run(stage: Arc<Stage>, scene: &Path, refs: &Path, seconds: f64) -> anyhow
         .enable_all()
         .build()?;
     let server = runtime
-        .block_on(async {
-            Server::start(&config.osc, Arc::new(EngineHandler(Arc::clone(&engine))))
-        })
+        .block_on(async { Server::start(&config.osc, Arc::new(Runner::new(Arc::clone(&engine)))) })
         .map_err(anyhow::Error::msg)?;
     if let Some(sender) = server.sender() {
-        engine.set_push(sender);
+        engine.set_pusher(sender);
     }
     let to = server
         .udp_addr()

@@ -42,7 +42,7 @@ pub fn target(source: &str) -> Option<anyhow::Result<(String, Framing)>> {
     let rest = rest.trim_end_matches('/');
     if rest.is_empty() || rest.contains('/') {
         return Some(Err(anyhow::anyhow!(
-            "{source}: not a console address: write eos://HOST or eos://HOST:PORT"
+            "{source}: not an Eos address: write eos://HOST or eos://HOST:PORT"
         )));
     }
     // A bare host (or a bracketed IPv6 address) takes the default port.
@@ -62,8 +62,8 @@ pub fn target(source: &str) -> Option<anyhow::Result<(String, Framing)>> {
     Some(Ok((addr, framing)))
 }
 
-/// A connection to the console.
-struct Console<'a> {
+/// A connection to the Eos console.
+struct EosConnection<'a> {
     source: &'a str,
     stream: TcpStream,
     framing: Framing,
@@ -74,7 +74,7 @@ struct Console<'a> {
     quiet: Duration,
 }
 
-impl Console<'_> {
+impl EosConnection<'_> {
     fn send(&mut self, addresses: &[String]) -> anyhow::Result<()> {
         let mut bytes = Vec::new();
         for a in addresses {
@@ -87,7 +87,7 @@ impl Console<'_> {
         }
         self.stream
             .write_all(&bytes)
-            .with_context(|| format!("{}: cannot send to the console", self.source))
+            .with_context(|| format!("{}: cannot send to Eos", self.source))
     }
 
     /// The next message, waiting at most `quiet` for it; `what` names what is being read.
@@ -101,7 +101,7 @@ impl Console<'_> {
             let left = deadline.saturating_duration_since(Instant::now());
             if left.is_zero() {
                 bail!(
-                    "{}: the console stopped answering while reading {} (nothing for {} s)",
+                    "{}: Eos stopped answering while reading {} (nothing for {} s)",
                     self.source,
                     what(),
                     self.quiet.as_secs_f64()
@@ -112,7 +112,7 @@ impl Console<'_> {
                 .with_context(|| format!("{}: cannot set a read timeout", self.source))?;
             let n = match self.stream.read(&mut buf) {
                 Ok(0) => bail!(
-                    "{}: the console closed the connection while reading {}",
+                    "{}: Eos closed the connection while reading {}",
                     self.source,
                     what()
                 ),
@@ -265,7 +265,7 @@ pub fn read(
     stream
         .set_write_timeout(Some(quiet))
         .with_context(|| format!("{source}: cannot set a write timeout"))?;
-    let mut c = Console {
+    let mut c = EosConnection {
         source,
         stream,
         framing,
@@ -345,7 +345,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn console_addresses_take_the_default_port_of_their_framing() {
+    fn eos_addresses_take_the_default_port_of_their_framing() {
         let t = |s: &str| target(s).map(|r| r.map_err(|e| e.to_string()));
         assert_eq!(
             t("eos://10.0.0.5").and_then(Result::ok),

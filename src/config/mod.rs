@@ -6,10 +6,13 @@ use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
-use crate::backup::BackupConfig;
 use crate::eos::EosConfig;
 use visobjd_dmx::{InputConfig, OutputConfig};
 use visobjd_scene::describe_toml_error;
+
+mod backup;
+
+pub use backup::BackupConfig;
 
 /// The whole configuration, paths resolved.
 #[derive(Debug, Clone)]
@@ -333,7 +336,7 @@ impl Config {
         }
         let mut output = file.output;
         if let Some(backup) = &file.backup {
-            crate::backup::configure(backup, &mut output).map_err(at)?;
+            backup::configure(backup, &mut output).map_err(at)?;
         }
         Ok(Config {
             path: path.to_path_buf(),
@@ -416,8 +419,8 @@ mod tests {
     #[test]
     fn shipped_configs_are_valid() {
         for (name, text) in [
-            ("visobjd.toml", include_str!("../config/visobjd.toml")),
-            ("booth.toml", include_str!("../config/booth.toml")),
+            ("visobjd.toml", include_str!("../../config/visobjd.toml")),
+            ("booth.toml", include_str!("../../config/booth.toml")),
         ] {
             let c = Config::parse(Path::new(name), text).unwrap();
             c.output.validate(&[1, 2]).unwrap();

@@ -1,0 +1,172 @@
+//! The references folder: the designer's images, listed, uploaded and read into objectives,
+//! from that folder only (no absolute paths, no `..`, no links out), and decoded one at a
+//! time (a big image takes hundreds of MB while it decodes).
+
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+
+use super::{Engine, Refusal};
+use crate::config::Config;
+use visobjd_method::objective::{self, Aspects, Objective, Region};
+
+/// Largest name of an uploaded reference image.
+const MAX_REFERENCE_NAME: usize = 100;
+
+/// The folder and what reading from it needs.
+pub(super) struct References {
+    folder: PathBuf,
+    /// Colours of a reference's palette.
+    palette_size: usize,
+    /// Held while a reference is decoded: one at a time, so many senders adding
+    /// 64-megapixel images at once cannot multiply the ~200 MB each decode takes.
+    reading: Mutex<()>,
+}
+
+impl References {
+    pub(super) fn new(config: &Config) -> References {
+        References {
+            folder: config.references.clone(),
+            palette_size: config.generate.palette as usize,
+            reading: Mutex::new(()),
+        }
+    }
+
+    fn one_at_a_time(&self) -> std::sync::MutexGuard<'_, ()> {
+        self.reading.lock().unwrap_or_else(|p| p.into_inner())
+    }
+}
+
+impl Engine {
+    /// The references folder (objective images are read from it, and only from it).
+    pub fn references(&self) -> &Path {
+        &self.references.folder
+    }
+
+    /// The image files (PNG, JPEG by their extension) in the references folder, sorted.
+    pub fn reference_names(&self) -> Result<Vec<String>, Refusal> {
+        let folder = self.references();
+        let dir = std::fs::read_dir(folder).map_err(|e| {
+            Refusal::internal(format!(
+                "the references folder {} is not readable: {e}",
+                folder.display()
+            ))
+        })?;
+        let mut names: Vec<String> = dir
+            .filter_map(|e| e.ok()?.file_name().into_string().ok())
+            .filter(|n| reference_format(n).is_some() && !n.starts_with('.'))
+            .collect();
+        names.sort();
+        Ok(names)
+    }
+
+    /// Stores an uploaded reference image as `name` in the references folder, atomically,
+    /// after the checks every reference passes (a plain file name with a PNG or JPEG
+    /// extension, content of that type, within the size limit, decodable). Never replaces a
+    /// file: a name taken is a conflict.
+    pub fn store_reference(&self, name: &str, bytes: &[u8]) -> Result<String, Refusal> {
+        let refused = |why: String| Refusal::input(format!("upload `{name}`: {why}"));
+        let plain = !name.is_empty()
+            && name.len() <= MAX_REFERENCE_NAME
+            && !name.starts_with('.')
+            && name
+                .bytes()
+                .all(|b| b.is_ascii_alphanumeric() || b"._- ".contains(&b));
+        if !plain {
+            return Err(refused(format!(
+                "a reference's name is a plain file name of at most {MAX_REFERENCE_NAME} letters, digits, spaces, '.', '_' or '-' (no folders), not starting with '.'"
+            )));
+        }
+        let Some(format) = reference_format(name) else {
+            return Err(refused("a reference is a .png, .jpg or .jpeg file".into()));
+        };
+        if image::guess_format(bytes).ok() != Some(format) {
+            return Err(refused(format!(
+                "the content is not a {} image",
+                format
+                    .extensions_str()
+                    .first()
+                    .copied()
+                    .unwrap_or("")
+                    .to_uppercase()
+            )));
+        }
+        {
+            let _one = self.references.one_at_a_time();
+            objective::decode_reference_bytes(bytes).map_err(&refused)?;
+        }
+        let path = self.references().join(name);
+        visobjd_files::write_new_atomic(&path, bytes).map_err(|e| match e.kind() {
+            std::io::ErrorKind::AlreadyExists => Refusal::conflict(format!(
+                "upload `{name}`: a reference of that name exists; choose another name"
+            )),
+            _ => Refusal::internal(format!(
+                "upload `{name}`: cannot write it in the references folder {}: {e}",
+                self.references().display()
+            )),
+        })?;
+        tracing::info!("reference {name} stored ({} bytes)", bytes.len());
+        Ok(name.to_string())
+    }
+
+    /// Reads and analyses a reference image from the references folder for a new
+    /// objective. One at a time, and slow for a big image: it runs on the sender's own
+    /// handling thread with the session unlocked, so a slow decode holds up only that
+    /// sender, whose later messages then see the objective.
+    pub fn read_objective(&self, name: &str, aspects: Aspects) -> Result<Objective, Refusal> {
+        let path = resolve_reference(self.references(), name)?;
+        let img = self
+            .decode_reference(&path)
+            .map_err(|e| Refusal::input(format!("{name} {e}")))?;
+        Ok(Objective {
+            image: name.to_string(),
+            aspects,
+            region: Region::FULL,
+            analysis: objective::analyze(&img, Region::FULL, self.references.palette_size),
+        })
+    }
+
+    /// Decodes the reference image at `path` (resolved in the references folder), one at a
+    /// time: a big image takes hundreds of MB while it decodes, and a page asks for every
+    /// reference's picture at once. Err is the decoder's phrase ("is not a PNG ...").
+    pub fn decode_reference(&self, path: &Path) -> Result<image::RgbImage, String> {
+        let _one = self.references.one_at_a_time();
+        objective::decode_reference(path)
+    }
+}
+
+/// The file `name` inside `references`, refusing anything that leads outside it.
+pub fn resolve_reference(references: &Path, name: &str) -> Result<PathBuf, Refusal> {
+    let relative = visobjd_scene::safe_relative(name).ok_or_else(|| {
+        Refusal::input(format!(
+            "image `{name}` must be a file name inside the references folder (no absolute paths, no ..)"
+        ))
+    })?;
+    let root = references.canonicalize().map_err(|e| {
+        Refusal::internal(format!(
+            "the references folder {} is not readable: {e}",
+            references.display()
+        ))
+    })?;
+    let path = root.join(relative).canonicalize().map_err(|_| {
+        Refusal::conflict(format!("image `{name}` is not in the references folder"))
+    })?;
+    if !path.starts_with(&root) {
+        return Err(Refusal::input(format!(
+            "image `{name}` leads outside the references folder"
+        )));
+    }
+    if !path.is_file() {
+        return Err(Refusal::conflict(format!("image `{name}` is not a file")));
+    }
+    Ok(path)
+}
+
+/// The image format a reference's file name promises, by its extension.
+fn reference_format(name: &str) -> Option<image::ImageFormat> {
+    let (_, ext) = name.rsplit_once('.')?;
+    match ext.to_ascii_lowercase().as_str() {
+        "png" => Some(image::ImageFormat::Png),
+        "jpg" | "jpeg" => Some(image::ImageFormat::Jpeg),
+        _ => None,
+    }
+}

@@ -1,0 +1,205 @@
+//! The designer's web page (docs/web.md): an optional HTTP/1.1 server (`[http] listen`)
+//! on axum, serving one self-contained page, the pictures it shows, an event stream of
+//! every change, and `POST /osc`, through which every change the page makes runs the same
+//! command path a tablet's message does (`crate::cmd::Runner`: one implementation per
+//! change). Reads (the page's state, pictures) go to the engine directly; nothing here
+//! changes the session but through the commands.
+//!
+//! By concern: this file (start, routes, the accept loop); `access` (who may reach it);
+//! `view` (the page's state as JSON); `pictures` (renders, thumbnails, reference images and
+//! their caches); `upload` (the references folder: list and upload); `bridge` (`POST /osc`
+//! and the event stream).
+//!
+//! Bounded: 32 connections, 10 s for a request head of at most 16 KiB, 4 KiB of command
+//! body, 32 MiB of upload, 60 s per request (the event stream excepted).
+
+mod access;
+mod bridge;
+mod pictures;
+mod upload;
+mod view;
+
+pub use access::Access;
+
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::time::Duration;
+
+use axum::Router;
+use axum::extract::{DefaultBodyLimit, Extension};
+use axum::http::{StatusCode, header};
+use axum::middleware;
+use axum::response::{IntoResponse, Response};
+use axum::routing::{get, post, put};
+use serde_json::json;
+use tokio::net::TcpListener;
+use tokio::sync::Semaphore;
+
+use crate::cmd::Runner;
+use crate::config::{Cidr, permits};
+use crate::engine::{Engine, RefusalKind};
+
+/// Largest request head (request line and headers); hyper answers 431 beyond it.
+const MAX_HEAD: usize = 16 * 1024;
+/// Largest command body (`POST /osc`).
+const MAX_COMMAND: usize = 4 * 1024;
+/// Time a client has to send a request head.
+const HEAD_TIMEOUT: Duration = Duration::from_secs(10);
+/// Time a request has to be answered (the body read included); not the event stream.
+const REQUEST_TIMEOUT: Duration = Duration::from_secs(60);
+/// Connections served at once; more are closed at once.
+const MAX_CONNECTIONS: usize = 32;
+
+const PAGE: &str = include_str!("page.html");
+
+/// The running server; dropping the runtime stops it.
+pub struct Http {
+    addr: SocketAddr,
+    accept: tokio::task::JoinHandle<()>,
+}
+
+impl Http {
+    /// Binds `listen` and serves in the current tokio runtime: reads from `engine`,
+    /// changes through `runner`.
+    pub async fn start(
+        listen: &str,
+        allow: Vec<Cidr>,
+        access: Access,
+        engine: Arc<Engine>,
+        runner: Runner,
+    ) -> Result<Http, String> {
+        let listener = TcpListener::bind(listen)
+            .await
+            .map_err(|e| format!("http.listen {listen}: cannot listen there: {e}"))?;
+        let addr = listener
+            .local_addr()
+            .map_err(|e| format!("http.listen {listen}: {e}"))?;
+        let shared = Arc::new(Shared {
+            engine,
+            runner,
+            access,
+            pictures: pictures::Caches::default(),
+        });
+        let accept = tokio::spawn(accept(listener, allow, router(shared)));
+        Ok(Http { addr, accept })
+    }
+
+    /// Stops taking connections (those open end with the runtime).
+    pub async fn stop(self) {
+        self.accept.abort();
+        // A cancelled task's error is the expected outcome.
+        let _ = self.accept.await;
+    }
+
+    /// The address it listens on.
+    pub fn addr(&self) -> SocketAddr {
+        self.addr
+    }
+}
+
+/// What every request's handler is given.
+struct Shared {
+    engine: Arc<Engine>,
+    runner: Runner,
+    access: Access,
+    pictures: pictures::Caches,
+}
+
+/// The client's address, put on each request by the accept loop.
+#[derive(Clone, Copy)]
+struct Client(SocketAddr);
+
+fn router(shared: Arc<Shared>) -> Router {
+    Router::new()
+        .route("/", get(|| async { page() }))
+        .route("/state.json", get(view::state_json))
+        .route("/events", get(bridge::events))
+        .route("/live.jpg", get(pictures::live))
+        .route("/thumb/{serial}/{file}", get(pictures::thumb))
+        .route("/thumb/{serial}/{k}/{file}", get(pictures::member))
+        .route("/ref/{file}", get(pictures::objective_reference))
+        .route("/selected/{file}", get(pictures::selected))
+        .route("/history/{file}", get(pictures::history))
+        .route("/look/{file}", get(pictures::saved_look))
+        .route("/references.json", get(upload::references))
+        .route(
+            "/references/{name}",
+            get(pictures::reference_file)
+                .merge(put(upload::upload).layer(DefaultBodyLimit::disable())),
+        )
+        .route(
+            "/osc",
+            post(bridge::command).layer(DefaultBodyLimit::max(MAX_COMMAND)),
+        )
+        .fallback(|| async { refuse(StatusCode::NOT_FOUND, "not found") })
+        .layer(tower_http::timeout::TimeoutLayer::with_status_code(
+            StatusCode::REQUEST_TIMEOUT,
+            REQUEST_TIMEOUT,
+        ))
+        .layer(middleware::from_fn_with_state(
+            Arc::clone(&shared),
+            access::guard,
+        ))
+        .with_state(shared)
+}
+
+async fn accept(listener: TcpListener, allow: Vec<Cidr>, app: Router) {
+    let slots = Arc::new(Semaphore::new(MAX_CONNECTIONS));
+    loop {
+        let (stream, from) = match listener.accept().await {
+            Ok(c) => c,
+            Err(e) => {
+                tracing::warn!("http: accept failed: {e}");
+                tokio::time::sleep(Duration::from_millis(100)).await;
+                continue;
+            }
+        };
+        if !permits(&allow, from.ip()) {
+            tracing::info!("http: refused {from}, not in osc.allow");
+            continue;
+        }
+        let Ok(slot) = Arc::clone(&slots).try_acquire_owned() else {
+            tracing::info!("http: {from} refused, {MAX_CONNECTIONS} connections busy");
+            continue;
+        };
+        let service = hyper_util::service::TowerToHyperService::new(
+            app.clone().layer(Extension(Client(from))),
+        );
+        tokio::spawn(async move {
+            let served = hyper::server::conn::http1::Builder::new()
+                .timer(hyper_util::rt::TokioTimer::new())
+                .header_read_timeout(HEAD_TIMEOUT)
+                .max_buf_size(MAX_HEAD)
+                .serve_connection(hyper_util::rt::TokioIo::new(stream), service)
+                .await;
+            if let Err(e) = served {
+                tracing::debug!("http: {from}: {e}");
+            }
+            drop(slot);
+        });
+    }
+}
+
+/// A refusal: its status and a sentence, as `{"error": ...}`.
+fn refuse(status: StatusCode, sentence: &str) -> Response {
+    (status, axum::Json(json!({ "error": sentence }))).into_response()
+}
+
+/// The status a refused command or upload is answered with: 400 for a wrong message, 409
+/// when the state does not allow it, 500 when something inside failed (docs/web.md).
+fn status(kind: RefusalKind) -> StatusCode {
+    match kind {
+        RefusalKind::Input => StatusCode::BAD_REQUEST,
+        RefusalKind::Conflict => StatusCode::CONFLICT,
+        RefusalKind::Internal => StatusCode::INTERNAL_SERVER_ERROR,
+    }
+}
+
+fn page() -> Response {
+    ([(header::CONTENT_TYPE, "text/html; charset=utf-8")], PAGE).into_response()
+}
+
+/// Renders and encodes off the runtime's threads.
+async fn blocking<T: Send + 'static>(f: impl FnOnce() -> T + Send + 'static) -> Option<T> {
+    tokio::task::spawn_blocking(f).await.ok()
+}
