@@ -23,7 +23,7 @@ use rand::{RngExt, SeedableRng};
 use serde::{Deserialize, Serialize};
 use visobjd_camera::{Camera, Shutter};
 use visobjd_compositor::basis::Precision;
-use visobjd_dmx::{Frame, Output, Patch};
+use visobjd_dmx::{Output, Patch, SlotLevels};
 use visobjd_hdr::{BracketSettings, ExposureFit, MergeSettings, Radiance, Response};
 use visobjd_scene::emitter::colour::{ciede2000, linear_srgb_to_xyz, xyz_to_lab};
 use visobjd_scene::look::{Level, Look};
@@ -545,7 +545,7 @@ impl Session<'_> {
     /// Puts `look` on the rig as the slot levels `frame` (its [`Patch::unmastered`], or a
     /// light's emitter alone: [`Patch::emitter_alone`]) and waits for the lamps and for
     /// frames that carry it.
-    fn show(&mut self, look: &Look, frame: Frame) -> Result<(), CaptureError> {
+    fn show(&mut self, look: &Look, frame: SlotLevels) -> Result<(), CaptureError> {
         let started = Instant::now();
         self.output.set_frame(look.clone(), frame);
         let ticks = self.output.stats().ticks;
@@ -669,7 +669,7 @@ impl Session<'_> {
     fn shoot_look(
         &mut self,
         look: &Look,
-        frame: Frame,
+        frame: SlotLevels,
         dark: bool,
     ) -> Result<visobjd_hdr::Merged, CaptureError> {
         self.show(look, frame)?;
@@ -713,7 +713,7 @@ impl Session<'_> {
     }
 
     /// The bytes light `l`'s slots are sent in `frame` (unmastered levels).
-    fn dmx_of(&self, l: usize, frame: &Frame) -> (u16, u16, Vec<u8>) {
+    fn dmx_of(&self, l: usize, frame: &SlotLevels) -> (u16, u16, Vec<u8>) {
         let patch = &self.patch;
         let bytes = patch.quantise(frame);
         let light = &self.scene.lights[l];

@@ -14,7 +14,7 @@ pub mod input;
 pub mod patch;
 mod wire;
 
-pub use patch::{Frame, Patch};
+pub use patch::{Patch, SlotLevels};
 
 pub use config::{ArtnetDest, InputConfig, OutputConfig, SacnDest, SacnInput};
 pub use input::Input;
@@ -69,7 +69,7 @@ struct Desired {
     look: Arc<Look>,
     /// Slot levels that stand for the look (`Output::set_frame`: capture shooting one
     /// emitter alone, which no look asks for); `None`: the look's own.
-    frame: Option<Arc<Frame>>,
+    frame: Option<Arc<SlotLevels>>,
     /// Bumped by every `set_look`, so the clock sees a new target even if equal.
     generation: u64,
     fade: Duration,
@@ -318,7 +318,7 @@ impl Output {
     /// [`Patch::emitter_alone`] makes them) on the wire at once, standing for `look`
     /// until the next [`Output::set_look`]: what capture uses to light one emitter alone,
     /// or a look solved through another patch.
-    pub fn set_frame(&self, look: Look, frame: Frame) {
+    pub fn set_frame(&self, look: Look, frame: SlotLevels) {
         let (look, frame) = (Arc::new(look), Arc::new(frame));
         self.desired.send_modify(|d| {
             d.look = look;
@@ -611,8 +611,8 @@ struct Clock {
     keepalive: bool,
     rx: watch::Receiver<Desired>,
     generation: u64,
-    from: Frame,
-    target: Frame,
+    from: SlotLevels,
+    target: SlotLevels,
     fade_start: Instant,
     fade: Duration,
     master: f32,
@@ -698,13 +698,13 @@ impl Clock {
     }
 
     /// The unmastered levels at `now`.
-    fn levels_at(&self, now: Instant) -> Frame {
+    fn levels_at(&self, now: Instant) -> SlotLevels {
         let elapsed = now.saturating_duration_since(self.fade_start);
         if self.fade.is_zero() || elapsed >= self.fade {
             self.target.clone()
         } else {
             let t = elapsed.as_secs_f32() / self.fade.as_secs_f32();
-            Frame::crossfade(&self.from, &self.target, t)
+            SlotLevels::crossfade(&self.from, &self.target, t)
         }
     }
 
