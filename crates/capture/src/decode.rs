@@ -74,8 +74,8 @@ impl Shot {
     }
 
     /// The shot as the merge takes it (borrowed, not copied).
-    pub fn frame(&self) -> visobjd_hdr::Frame<'_> {
-        visobjd_hdr::Frame {
+    pub fn frame(&self) -> visobjd_hdr::BracketFrame<'_> {
+        visobjd_hdr::BracketFrame {
             width: self.width,
             height: self.height,
             exposure: self.exposure,
