@@ -23,7 +23,7 @@ use tokio::net::TcpStream;
 use crate::engine::{Engine, msg};
 use crate::osc::Peer;
 use crate::osc::args::Request;
-use crate::osc::framing::{self, Decoder, Frame, Framing};
+use crate::osc::framing::{self, Decoder, Framing, StreamFrame};
 use crate::osc::packet::{self, Item};
 use visobjd_dmx::OutputConfig;
 
@@ -167,8 +167,8 @@ async fn follow(engine: &Arc<Engine>, main: &str) -> Result<String, String> {
                 decoder.feed(&buf[..n], &mut frames);
                 for frame in frames.drain(..) {
                     let bytes = match frame {
-                        Frame::Packet(bytes) => bytes,
-                        Frame::Oversize { len, .. } => {
+                        StreamFrame::Packet(bytes) => bytes,
+                        StreamFrame::Oversize { len, .. } => {
                             tracing::error!("backup: a {len}-byte frame from the main is over {STATE_FRAME} bytes; skipped");
                             continue;
                         }

@@ -23,7 +23,7 @@ use tokio::task::{JoinHandle, JoinSet};
 use tracing::{debug, error, info, trace, warn};
 
 use super::args::Request;
-use super::framing::{self, Decoder, Frame, Framing};
+use super::framing::{self, Decoder, Framing, StreamFrame};
 use super::packet::{self, Item, PacketError};
 use super::peers::{Route as PeerRoute, Routes};
 use crate::config::{Cidr, OscConfig};
@@ -856,8 +856,8 @@ async fn connection(
                     let mut out = Vec::new();
                     for frame in batch {
                         let replies = match frame {
-                            Frame::Packet(p) => handler_shared.dispatch(&p, &peer),
-                            Frame::Oversize { len, head } => {
+                            StreamFrame::Packet(p) => handler_shared.dispatch(&p, &peer),
+                            StreamFrame::Oversize { len, head } => {
                                 handler_shared.oversize(len, &head, from).into_iter().collect()
                             }
                         };
