@@ -21,7 +21,7 @@ use tokio::net::TcpStream;
 use crate::cmd::Runner;
 use crate::engine::msg;
 use crate::osc::args::Request;
-use crate::osc::framing::{self, Decoder, Frame, Framing};
+use crate::osc::framing::{self, Decoder, Framing, StreamFrame};
 use crate::osc::packet::{self, Item};
 use crate::osc::{self, Peer};
 
@@ -92,8 +92,8 @@ async fn connection(runner: &Runner, main: &str) -> Result<String, String> {
                 decoder.feed(&buf[..n], &mut frames);
                 for frame in frames.drain(..) {
                     let bytes = match frame {
-                        Frame::Packet(bytes) => bytes,
-                        Frame::Oversize { len, .. } => {
+                        StreamFrame::Packet(bytes) => bytes,
+                        StreamFrame::Oversize { len, .. } => {
                             tracing::error!("backup: a {len}-byte frame from the main is over {STATE_FRAME} bytes; skipped");
                             continue;
                         }

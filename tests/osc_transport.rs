@@ -14,7 +14,7 @@ use common::tools;
 use rosc::{OscBundle, OscMessage, OscPacket, OscTime, OscType};
 use visobjd::config::OscConfig;
 use visobjd::osc::args::Request;
-use visobjd::osc::framing::{self, Decoder, Frame, Framing};
+use visobjd::osc::framing::{self, Decoder, Framing, StreamFrame};
 use visobjd::osc::{Handler, Limits, Peer, Server, Transport};
 
 const PATIENCE: Duration = Duration::from_secs(5);
@@ -393,7 +393,7 @@ fn udp_on_ipv6_loopback() {
 struct Tcp {
     stream: TcpStream,
     decoder: Decoder,
-    frames: Vec<Frame>,
+    frames: Vec<StreamFrame>,
 }
 
 impl Tcp {
@@ -415,7 +415,7 @@ impl Tcp {
             assert!(n > 0, "closed while waiting for a reply");
             self.decoder.feed(&buf[..n], &mut self.frames);
         }
-        let Frame::Packet(frame) = self.frames.remove(0) else {
+        let StreamFrame::Packet(frame) = self.frames.remove(0) else {
             panic!("replies are never over the frame limit");
         };
         match rosc::decoder::decode_udp(&frame).unwrap().1 {

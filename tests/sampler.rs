@@ -7,7 +7,9 @@ use rand::SeedableRng;
 use rand::rngs::Xoshiro256PlusPlus as Rng;
 use rand_distr::{Distribution, Normal};
 use visobjd_method::objective::{Aspects, PaletteColor, Region};
-use visobjd_method::sampler::{Constraints, Keys, Plan, Rig, Spread, Target, gibbs, key_count};
+use visobjd_method::sampler::{
+    Constraints, Keys, LightGroups, Plan, Spread, Target, gibbs, key_count,
+};
 use visobjd_scene::look::{Level, Look};
 
 fn mean(v: &[f32]) -> f32 {
@@ -20,8 +22,8 @@ fn variance(v: &[f32]) -> f32 {
 }
 
 /// A rig of `n` lights, each its own group, all colour-capable.
-fn rig(n: usize) -> Rig {
-    Rig {
+fn rig(n: usize) -> LightGroups {
+    LightGroups {
         groups: (0..n).map(|l| vec![l]).collect(),
         colored: vec![true; n],
     }
@@ -179,7 +181,7 @@ fn brightness_normalisation_evens_out_lights_of_different_strength() {
 #[test]
 fn groups_share_one_value_and_locked_lights_keep_the_base_exactly() {
     let n = 9;
-    let r = Rig {
+    let r = LightGroups {
         groups: vec![vec![0, 1, 2], vec![3, 4, 5], vec![6, 7, 8]],
         colored: vec![true; n],
     };
@@ -382,8 +384,8 @@ fn region_targeting_selects_exactly_the_expected_lights() {
 use visobjd_method::constrain::{Ratio, Saturation, clamp_saturation, saturation, transfer};
 
 /// A rig of `groups` groups of `size` lights each, all colour-capable.
-fn grouped(groups: usize, size: usize) -> Rig {
-    Rig {
+fn grouped(groups: usize, size: usize) -> LightGroups {
+    LightGroups {
         groups: (0..groups)
             .map(|g| (g * size..(g + 1) * size).collect())
             .collect(),

@@ -2,7 +2,7 @@
 
 use std::path::{Path, PathBuf};
 
-use visobjd_synth::{Rig, SynthError, render_light, synth};
+use visobjd_synth::{SynthError, VirtualStage, render_light, synth};
 
 /// A 32x18 view looking almost straight down at the floor point (0, 0, 4).
 const BASE: &str = r#"
@@ -31,8 +31,8 @@ fn light(position: [f32; 3], aim: [f32; 3]) -> String {
     )
 }
 
-fn parse(text: &str) -> Rig {
-    match Rig::parse(text) {
+fn parse(text: &str) -> VirtualStage {
+    match VirtualStage::parse(text) {
         Ok(r) => r,
         Err(e) => panic!("test rig does not parse: {e}"),
     }
@@ -200,7 +200,7 @@ fn scene_lists_every_light_with_a_readable_basis() {
 }
 
 fn rig_error(text: &str) -> String {
-    match Rig::parse(text) {
+    match VirtualStage::parse(text) {
         Ok(_) => panic!("accepted a bad rig:\n{text}"),
         Err(e) => {
             let msg = e.to_string();

@@ -2,7 +2,7 @@
 //! `tests/fuzz_corpus.rs`, which replays the committed corpus and every crash found so far
 //! under `cargo test`.
 
-use visobjd::osc::framing::{Decoder, Frame, HEAD, encode};
+use visobjd::osc::framing::{Decoder, HEAD, StreamFrame, encode};
 use visobjd_method::objective::{Region, analyze, decode_reference_bytes};
 
 /// One UDP datagram (or stream frame) through the daemon's parsing: packet decoding with
@@ -36,16 +36,16 @@ pub fn osc_stream(data: &[u8]) {
     }
     for frame in frames {
         match frame {
-            Frame::Packet(p) => {
+            StreamFrame::Packet(p) => {
                 assert!(!p.is_empty() && p.len() <= MAX);
                 let framing = d.framing().expect("a frame implies a framing");
                 let mut again = Decoder::new(MAX);
                 let mut back = Vec::new();
                 again.feed(&encode(framing, &p), &mut back);
-                assert_eq!(back, [Frame::Packet(p.clone())]);
+                assert_eq!(back, [StreamFrame::Packet(p.clone())]);
                 osc_packet(&p);
             }
-            Frame::Oversize { len, head } => {
+            StreamFrame::Oversize { len, head } => {
                 assert!(len > MAX && head.len() <= HEAD.min(MAX));
                 let _ = visobjd::osc::packet::first_address(&head);
             }

@@ -10,7 +10,7 @@ use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
 use anyhow::Context;
-use visobjd_capture::{Format, Options, Progress};
+use visobjd_capture::{CaptureOptions, Format, Progress};
 use visobjd_dmx::{Output, Patch, SacnDest};
 use visobjd_scene::Scene;
 use visobjd_scene::look::Look;
@@ -125,9 +125,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     } else {
         visobjd_camera::open(
             &args.camera,
-            visobjd_camera::Options {
+            visobjd_camera::CameraOptions {
                 timeout: Duration::from_secs_f64(config.capture.camera_timeout_s),
-                ..visobjd_camera::Options::default()
+                ..visobjd_camera::CameraOptions::default()
             },
         )?
     };
@@ -142,7 +142,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         &config.scene.join("capture"),
         Look::off(scene.lights.len()),
     )?;
-    let options = Options {
+    let options = CaptureOptions {
         lights,
         settle: Duration::from_secs_f64(settle),
         width: args.width.max(1),

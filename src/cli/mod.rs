@@ -11,18 +11,18 @@ mod run;
 mod send;
 mod touchosc;
 
-use clap::{ArgMatches, CommandFactory, FromArgMatches, Parser, Subcommand};
+use clap::{ArgMatches, CommandFactory, FromArgMatches, Parser};
 
 /// visobjd: reference images in, stage lighting looks out.
 #[derive(Parser)]
 #[command(version, about)]
 struct Cli {
     #[command(subcommand)]
-    command: Command,
+    command: Subcommand,
 }
 
-#[derive(Subcommand)]
-enum Command {
+#[derive(clap::Subcommand)]
+enum Subcommand {
     /// The daemon: loads the scene, listens for OSC, outputs DMX until SIGINT/SIGTERM.
     Run(run::Args),
     /// Offline: one generate from reference images, written as a contact sheet (and JSON).
@@ -100,7 +100,7 @@ pub fn main() -> std::process::ExitCode {
         .expect("clap requires a subcommand");
     // The daemon logs what it does; the offline commands only what went wrong.
     let level = match &cli.command {
-        Command::Run(args) => args.log_level.as_str(),
+        Subcommand::Run(args) => args.log_level.as_str(),
         _ => "warn",
     };
     if let Err(e) = logs::init(level) {
@@ -108,11 +108,11 @@ pub fn main() -> std::process::ExitCode {
         return std::process::ExitCode::FAILURE;
     }
     let result = match cli.command {
-        Command::Run(args) => run::run(args),
-        Command::Gallery(args) => gallery::run(args, sub),
-        Command::Render(args) => render::run(args),
-        Command::Check(args) => check::run(args),
-        Command::Synth { rig, out } => visobjd_synth::synth(&rig, &out)
+        Subcommand::Run(args) => run::run(args),
+        Subcommand::Gallery(args) => gallery::run(args, sub),
+        Subcommand::Render(args) => render::run(args),
+        Subcommand::Check(args) => check::run(args),
+        Subcommand::Synth { rig, out } => visobjd_synth::synth(&rig, &out)
             .map(|r| {
                 println!(
                     "synth: {} lights at {}x{} in {:.1} s -> {}",
@@ -124,11 +124,11 @@ pub fn main() -> std::process::ExitCode {
                 )
             })
             .map_err(anyhow::Error::from),
-        Command::Send(args) => send::run(args),
-        Command::Touchosc(args) => touchosc::run(args),
-        Command::Bench(args) => bench::run(args),
-        Command::Capture(args) => capture::run(args),
-        Command::Import(args) => import::run(args),
+        Subcommand::Send(args) => send::run(args),
+        Subcommand::Touchosc(args) => touchosc::run(args),
+        Subcommand::Bench(args) => bench::run(args),
+        Subcommand::Capture(args) => capture::run(args),
+        Subcommand::Import(args) => import::run(args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

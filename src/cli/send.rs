@@ -7,7 +7,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, bail};
 use rosc::{OscMessage, OscPacket, OscType};
 
-use crate::osc::framing::{self, Decoder, Frame, Framing};
+use crate::osc::framing::{self, Decoder, Framing, StreamFrame};
 use crate::osc::packet;
 
 /// Arguments of `send`.
@@ -81,7 +81,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             };
             decoder.feed(&buf[..n], &mut frames);
             for frame in frames.drain(..) {
-                let Frame::Packet(frame) = frame else {
+                let StreamFrame::Packet(frame) = frame else {
                     anyhow::bail!("reply from {to}: a frame over the size limit");
                 };
                 for m in packet::decode(&frame).unwrap_or_default() {

@@ -175,7 +175,7 @@ impl Session {
             locked,
             keys: self.key_groups.clone(),
             per_light,
-            ..Constraints::none(&visobjd_method::sampler::Rig::new(scene))
+            ..Constraints::none(&visobjd_method::sampler::LightGroups::new(scene))
         };
         self.rules.apply(scene, &mut c);
         c

@@ -30,7 +30,7 @@ pub const HEAD: usize = 256;
 
 /// One frame taken off a stream.
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub enum Frame {
+pub enum StreamFrame {
     /// A whole packet.
     Packet(Vec<u8>),
     /// A frame over the size limit: reported once its first bytes are in, then skipped
@@ -96,9 +96,9 @@ impl Decoder {
     }
 
     /// Consumes `data` and appends every frame it completes to `out`, in order. Empty
-    /// frames are skipped; a frame over the limit is reported once as [`Frame::Oversize`]
+    /// frames are skipped; a frame over the limit is reported once as [`StreamFrame::Oversize`]
     /// and its remaining bytes are dropped as they arrive.
-    pub fn feed(&mut self, data: &[u8], out: &mut Vec<Frame>) {
+    pub fn feed(&mut self, data: &[u8], out: &mut Vec<StreamFrame>) {
         let framing = match (self.framing, data.first()) {
             (Some(f), _) => f,
             (None, None) => return,
@@ -122,7 +122,7 @@ impl Decoder {
         HEAD.min(self.max)
     }
 
-    fn feed_slip(&mut self, data: &[u8], out: &mut Vec<Frame>) {
+    fn feed_slip(&mut self, data: &[u8], out: &mut Vec<StreamFrame>) {
         for &b in data {
             if self.skip.is_some() {
                 // Skipping an oversize frame: only its END matters.
@@ -144,7 +144,7 @@ impl Decoder {
                 match b {
                     END => {
                         if !self.buf.is_empty() {
-                            out.push(Frame::Packet(std::mem::take(&mut self.buf)));
+                            out.push(StreamFrame::Packet(std::mem::take(&mut self.buf)));
                         }
                         continue;
                     }
@@ -158,7 +158,7 @@ impl Decoder {
             if self.buf.len() >= self.max {
                 let mut head = std::mem::take(&mut self.buf);
                 head.truncate(self.head_len());
-                out.push(Frame::Oversize {
+                out.push(StreamFrame::Oversize {
                     len: self.max + 1,
                     head,
                 });
@@ -169,7 +169,7 @@ impl Decoder {
         }
     }
 
-    fn feed_prefixed(&mut self, mut data: &[u8], out: &mut Vec<Frame>) {
+    fn feed_prefixed(&mut self, mut data: &[u8], out: &mut Vec<StreamFrame>) {
         while !data.is_empty() {
             if let Some(left) = self.skip {
                 let n = left.min(data.len());
@@ -200,7 +200,7 @@ impl Decoder {
                 data = &data[n..];
                 if self.buf.len() == head_len {
                     self.want = None;
-                    out.push(Frame::Oversize {
+                    out.push(StreamFrame::Oversize {
                         len: want,
                         head: std::mem::take(&mut self.buf),
                     });
@@ -213,7 +213,7 @@ impl Decoder {
             data = &data[n..];
             if self.buf.len() == want {
                 self.want = None;
-                out.push(Frame::Packet(std::mem::take(&mut self.buf)));
+                out.push(StreamFrame::Packet(std::mem::take(&mut self.buf)));
             }
         }
     }
@@ -263,7 +263,7 @@ mod tests {
         }
         out.into_iter()
             .map(|f| match f {
-                Frame::Packet(p) => p,
+                StreamFrame::Packet(p) => p,
                 other => panic!("{other:?}"),
             })
             .collect()
@@ -310,7 +310,10 @@ mod tests {
         d.feed(&[b'a', b'b', END, 0, 1, END], &mut out);
         assert_eq!(
             out,
-            [Frame::Packet(b"ab".to_vec()), Frame::Packet(vec![0, 1])]
+            [
+                StreamFrame::Packet(b"ab".to_vec()),
+                StreamFrame::Packet(vec![0, 1])
+            ]
         );
     }
 
@@ -357,12 +360,12 @@ mod tests {
                 assert_eq!(
                     out,
                     [
-                        Frame::Packet(vec![1; 16]),
-                        Frame::Oversize {
+                        StreamFrame::Packet(vec![1; 16]),
+                        StreamFrame::Oversize {
                             len,
                             head: big[..limit].to_vec()
                         },
-                        Frame::Packet(b"after".to_vec()),
+                        StreamFrame::Packet(b"after".to_vec()),
                     ],
                     "{framing:?} in chunks of {chunk}"
                 );
@@ -376,7 +379,7 @@ mod tests {
         d.feed(&[7; 40], &mut out);
         assert_eq!(
             out,
-            [Frame::Oversize {
+            [StreamFrame::Oversize {
                 len: u32::MAX as usize,
                 head: vec![7; 16]
             }]

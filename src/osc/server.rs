@@ -21,9 +21,10 @@ use tokio::runtime::Handle;
 use tokio::sync::{Notify, mpsc};
 use tokio::task::{JoinHandle, JoinSet};
 use tracing::{debug, error, info, trace, warn};
+use visobjd_throttle::Throttle;
 
 use super::args::Request;
-use super::framing::{self, Decoder, Frame, Framing};
+use super::framing::{self, Decoder, Framing, StreamFrame};
 use super::packet::{self, Item, PacketError};
 use super::peers::{Route as PeerRoute, Routes};
 use crate::config::{Cidr, OscConfig};
@@ -604,7 +605,7 @@ async fn udp_loop(sender: Sender, shared: Arc<Shared>) {
         let (n, from) = match socket.recv_from(&mut buf).await {
             Ok(got) => got,
             Err(e) => {
-                if let Some(n) = error_log.hit() {
+                if let Some(n) = hit(&mut error_log) {
                     debug!("OSC over UDP: receive failed: {e} ({n} since the last report)");
                 }
                 continue;
@@ -854,8 +855,8 @@ async fn connection(
                     let mut out = Vec::new();
                     for frame in batch {
                         let replies = match frame {
-                            Frame::Packet(p) => handler_shared.dispatch(&p, &peer),
-                            Frame::Oversize { len, head } => {
+                            StreamFrame::Packet(p) => handler_shared.dispatch(&p, &peer),
+                            StreamFrame::Oversize { len, head } => {
                                 handler_shared.oversize(len, &head, from).into_iter().collect()
                             }
                         };
@@ -970,45 +971,20 @@ fn plain(e: &std::io::Error) -> String {
         .unwrap_or_default()
 }
 
-/// At most one log line per 10 s for a noisy event, reporting how many happened meanwhile.
-#[derive(Debug, Default)]
-struct Throttle {
-    last: Option<Instant>,
-    count: u64,
+/// Counts an event on `t` at the time of the call: `Some(events since the last line, this
+/// one included)`, the count the OSC lines report, when a line should be logged now.
+fn hit(t: &mut Throttle) -> Option<u64> {
+    t.allow(Instant::now()).map(|left_out| left_out + 1)
 }
 
-const LOG_EVERY: Duration = Duration::from_secs(10);
-
-impl Throttle {
-    /// Counts an event; Some(count since the last line) when a line should be logged now.
-    fn hit(&mut self) -> Option<u64> {
-        self.count += 1;
-        let now = Instant::now();
-        if self.last.is_some_and(|l| now.duration_since(l) < LOG_EVERY) {
-            return None;
-        }
-        self.last = Some(now);
-        Some(std::mem::take(&mut self.count))
-    }
-}
-
+/// [`hit`] on a throttle the server's tasks share.
 fn throttled(t: &Mutex<Throttle>) -> Option<u64> {
-    t.lock().unwrap_or_else(|e| e.into_inner()).hit()
+    hit(&mut t.lock().unwrap_or_else(|e| e.into_inner()))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn throttle_logs_once_per_period_with_a_count() {
-        let mut t = Throttle::default();
-        assert_eq!(t.hit(), Some(1));
-        assert_eq!(t.hit(), None);
-        assert_eq!(t.hit(), None);
-        t.last = t.last.and_then(|l| l.checked_sub(LOG_EVERY));
-        assert_eq!(t.hit(), Some(3));
-    }
 
     #[test]
     fn the_udp_socket_holds_bursts() {

@@ -6,8 +6,8 @@ use std::path::{Path, PathBuf};
 
 use crate::run::{display, with_retry};
 use crate::{
-    Camera, Description, Error, Exposure, ExposureSource, Frame, Options, Setting, Settings,
-    Shutter, shutter::decimal,
+    Camera, CameraOptions, CameraSetting, Description, Error, ExifExposure, ExposureSource,
+    Settings, Shot, Shutter, shutter::decimal,
 };
 
 /// A camera that runs a command built from a template for each frame.
@@ -24,13 +24,13 @@ use crate::{
 #[derive(Debug)]
 pub struct CommandCamera {
     words: Vec<String>,
-    options: Options,
+    options: CameraOptions,
 }
 
 impl CommandCamera {
     /// Checks the template: a program, and `{out}` somewhere (the frame must land where
     /// the capture command expects it). Starts no process.
-    pub fn new(template: &str, options: Options) -> Result<Self, Error> {
+    pub fn new(template: &str, options: CameraOptions) -> Result<Self, Error> {
         let words: Vec<String> = template.split_whitespace().map(str::to_string).collect();
         let spec = || format!("command:{template}");
         if words.is_empty() {
@@ -65,7 +65,7 @@ impl Camera for CommandCamera {
         })
     }
 
-    fn config(&mut self, key: &str) -> Result<Setting, Error> {
+    fn config(&mut self, key: &str) -> Result<CameraSetting, Error> {
         Err(self.unsupported(&format!("setting {key}")))
     }
 
@@ -77,7 +77,7 @@ impl Camera for CommandCamera {
         Err(self.unsupported(&format!("setting {key}")))
     }
 
-    fn capture(&mut self, shutter: &Shutter, out: &Path) -> Result<Frame, Error> {
+    fn capture(&mut self, shutter: &Shutter, out: &Path) -> Result<Shot, Error> {
         if let Some(folder) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
             std::fs::create_dir_all(folder).map_err(|source| Error::Io {
                 path: folder.to_path_buf(),
@@ -145,7 +145,7 @@ impl Camera for CommandCamera {
         let (exposure, source) = match crate::read_exposure(out)? {
             Some(exposure) => (exposure, ExposureSource::Exif),
             None => (
-                Exposure {
+                ExifExposure {
                     seconds: shutter.seconds(),
                     iso: None,
                     f_number: None,
@@ -153,7 +153,7 @@ impl Camera for CommandCamera {
                 ExposureSource::Assumed,
             ),
         };
-        Ok(Frame {
+        Ok(Shot {
             paths: vec![out.to_path_buf()],
             exposure,
             source,

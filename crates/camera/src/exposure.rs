@@ -10,9 +10,10 @@ use exif::{In, Tag};
 
 use crate::Error;
 
-/// A frame's exposure.
+/// A frame's exposure as its EXIF records it: the time always, ISO and f-number only
+/// when the file has them (capture fills the gaps before the HDR merge).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Exposure {
+pub struct ExifExposure {
     /// The exposure time, in seconds.
     pub seconds: f64,
     /// `ISOSpeedRatings` (EXIF 2.3: `PhotographicSensitivity`), if recorded.
@@ -21,7 +22,7 @@ pub struct Exposure {
     pub f_number: Option<f64>,
 }
 
-/// Where a [`crate::Frame`]'s exposure came from.
+/// Where a [`crate::Shot`]'s exposure came from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ExposureSource {
     /// Read from the file's EXIF.
@@ -34,7 +35,7 @@ pub enum ExposureSource {
 /// Reads the exposure from a file's EXIF (JPEG, TIFF-based RAW, PNG, HEIF, WebP), looking
 /// in IFD0 and its Exif sub-IFD. `Ok(None)` when the file has no EXIF or no
 /// `ExposureTime`; an error when the file cannot be opened or its EXIF is broken.
-pub fn read_exposure(path: &Path) -> Result<Option<Exposure>, Error> {
+pub fn read_exposure(path: &Path) -> Result<Option<ExifExposure>, Error> {
     let file = File::open(path).map_err(|source| Error::Io {
         path: path.to_path_buf(),
         source,
@@ -78,7 +79,7 @@ pub fn read_exposure(path: &Path) -> Result<Option<Exposure>, Error> {
     let Some(seconds) = number(Tag::ExposureTime) else {
         return Ok(None);
     };
-    Ok(Some(Exposure {
+    Ok(Some(ExifExposure {
         seconds,
         iso: number(Tag::PhotographicSensitivity),
         f_number: number(Tag::FNumber),

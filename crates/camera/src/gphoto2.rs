@@ -9,7 +9,8 @@ use std::path::{Path, PathBuf};
 
 use crate::run::{Finished, display, with_retry};
 use crate::{
-    Camera, Description, Error, ExposureSource, Frame, Options, Setting, Settings, Shutter,
+    Camera, CameraOptions, CameraSetting, Description, Error, ExposureSource, Settings, Shot,
+    Shutter,
 };
 
 /// gphoto2's "Bad parameters": the camera refused a value or a key. Trying again cannot
@@ -19,15 +20,15 @@ const BAD_PARAMETERS: i32 = -2;
 /// A camera driven through the `gphoto2` tool (any body libgphoto2 supports).
 #[derive(Debug)]
 pub struct Gphoto2 {
-    options: Options,
+    options: CameraOptions,
     /// Settings read so far, so `set_config` and `capture` can check a value against the
     /// choices without a call. Refreshed by `config`.
-    known: HashMap<String, Setting>,
+    known: HashMap<String, CameraSetting>,
 }
 
 impl Gphoto2 {
     /// A driver for the first camera gphoto2 finds. Starts no process.
-    pub fn new(options: Options) -> Self {
+    pub fn new(options: CameraOptions) -> Self {
         Gphoto2 {
             options,
             known: HashMap::new(),
@@ -64,7 +65,7 @@ impl Gphoto2 {
     }
 
     /// The known setting for `key`, reading it if not yet known.
-    fn known(&mut self, key: &str) -> Result<Setting, Error> {
+    fn known(&mut self, key: &str) -> Result<CameraSetting, Error> {
         match self.known.get(key) {
             Some(setting) => Ok(setting.clone()),
             None => self.config(key),
@@ -90,7 +91,7 @@ impl Gphoto2 {
     }
 
     /// `config`, but `None` when the body has no such key.
-    fn optional(&mut self, key: &str) -> Result<Option<Setting>, Error> {
+    fn optional(&mut self, key: &str) -> Result<Option<CameraSetting>, Error> {
         match self.config(key) {
             Ok(setting) => Ok(Some(setting)),
             Err(Error::Tool { message, .. }) if message.contains("not found in configuration") => {
@@ -116,7 +117,7 @@ impl Camera for Gphoto2 {
         cameras.into_iter().next().ok_or(Error::NoCamera { call })
     }
 
-    fn config(&mut self, key: &str) -> Result<Setting, Error> {
+    fn config(&mut self, key: &str) -> Result<CameraSetting, Error> {
         let done = self.call(&["--get-config", key])?;
         let setting = parse_config(key, &done.stdout).map_err(|problem| Error::Parse {
             call: display(&self.options.gphoto2, &["--get-config".into(), key.into()]),
@@ -151,7 +152,7 @@ impl Camera for Gphoto2 {
         Ok(())
     }
 
-    fn capture(&mut self, shutter: &Shutter, out: &Path) -> Result<Frame, Error> {
+    fn capture(&mut self, shutter: &Shutter, out: &Path) -> Result<Shot, Error> {
         self.check("shutterspeed", shutter.text())?;
         let folder = out.parent().filter(|p| !p.as_os_str().is_empty());
         if let Some(folder) = folder {
@@ -195,7 +196,7 @@ impl Camera for Gphoto2 {
         }
         for path in &paths {
             if let Some(exposure) = crate::read_exposure(path)? {
-                return Ok(Frame {
+                return Ok(Shot {
                     paths,
                     exposure,
                     source: ExposureSource::Exif,
@@ -242,8 +243,8 @@ pub fn parse_auto_detect(stdout: &str) -> Result<Vec<Description>, String> {
 /// Reads `gphoto2 --get-config KEY`: `Label:`, `Readonly:`, `Type:`, `Current:` and
 /// `Choice: N VALUE` lines up to `END`. Unknown lines (`Bottom:`, `Top:`, `Step:` of a
 /// range, `Printable:`) are ignored.
-pub fn parse_config(key: &str, stdout: &str) -> Result<Setting, String> {
-    let mut setting = Setting {
+pub fn parse_config(key: &str, stdout: &str) -> Result<CameraSetting, String> {
+    let mut setting = CameraSetting {
         key: key.to_string(),
         label: String::new(),
         readonly: false,

@@ -11,8 +11,8 @@
 //!
 //! ```no_run
 //! use std::path::Path;
-//! use visobjd_camera::{open, Options};
-//! let mut camera = open("gphoto2", Options::default())?;
+//! use visobjd_camera::{open, CameraOptions};
+//! let mut camera = open("gphoto2", CameraOptions::default())?;
 //! println!("{}", camera.describe()?.model);
 //! let settings = camera.settings()?;
 //! for shutter in settings.shutter.shutters() {
@@ -37,7 +37,7 @@ use std::time::Duration;
 
 pub use command::CommandCamera;
 pub use error::Error;
-pub use exposure::{Exposure, ExposureSource, read_exposure};
+pub use exposure::{ExifExposure, ExposureSource, read_exposure};
 pub use gphoto2::{Gphoto2, parse_auto_detect, parse_config, tool_message};
 pub use shutter::Shutter;
 
@@ -49,7 +49,7 @@ pub const DEFAULT_TIMEOUT: Duration = Duration::from_secs(60);
 /// How camera processes are run. The capture command fills `timeout` from
 /// `[capture] camera_timeout_s`.
 #[derive(Debug, Clone)]
-pub struct Options {
+pub struct CameraOptions {
     /// Per call: after this the process is killed, and the call is tried once more.
     pub timeout: Duration,
     /// The gphoto2 program: a name looked up on `PATH` (the child's `PATH`, if `env` sets
@@ -60,9 +60,9 @@ pub struct Options {
     pub env: Vec<(OsString, OsString)>,
 }
 
-impl Default for Options {
+impl Default for CameraOptions {
     fn default() -> Self {
-        Options {
+        CameraOptions {
             timeout: DEFAULT_TIMEOUT,
             gphoto2: PathBuf::from("gphoto2"),
             env: Vec::new(),
@@ -81,7 +81,7 @@ pub struct Description {
 
 /// One configuration entry as `gphoto2 --get-config KEY` prints it.
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Setting {
+pub struct CameraSetting {
     /// The key asked for (`shutterspeed`).
     pub key: String,
     /// The camera's label (`Shutter Speed`).
@@ -96,7 +96,7 @@ pub struct Setting {
     pub choices: Vec<String>,
 }
 
-impl Setting {
+impl CameraSetting {
     /// The shutter choices that are times, in the camera's order (`bulb` and other
     /// non-times skipped): what a bracket is chosen from.
     pub fn shutters(&self) -> Vec<Shutter> {
@@ -116,22 +116,22 @@ impl Setting {
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Settings {
     /// `shutterspeed`: the bracket's choices.
-    pub shutter: Setting,
+    pub shutter: CameraSetting,
     /// `iso`, if the body has it.
-    pub iso: Option<Setting>,
+    pub iso: Option<CameraSetting>,
     /// `aperture`, or `f-number` on bodies that call it that (values like `f/8`).
-    pub aperture: Option<Setting>,
+    pub aperture: Option<CameraSetting>,
     /// `imageformat` (JPEG, RAW, RAW + JPEG), if the body has it.
-    pub image_format: Option<Setting>,
+    pub image_format: Option<CameraSetting>,
 }
 
 /// One shot: the files written and the exposure they record.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Frame {
+pub struct Shot {
     /// Every file written (RAW + JPEG gives two), in the order written.
     pub paths: Vec<PathBuf>,
     /// The frame's exposure.
-    pub exposure: Exposure,
+    pub exposure: ExifExposure,
     /// Whether `exposure` was read from a file's EXIF or assumed from the request.
     pub source: ExposureSource,
 }
@@ -143,7 +143,7 @@ pub trait Camera {
     fn describe(&mut self) -> Result<Description, Error>;
 
     /// Reads one configuration entry with its choices.
-    fn config(&mut self, key: &str) -> Result<Setting, Error>;
+    fn config(&mut self, key: &str) -> Result<CameraSetting, Error>;
 
     /// Reads shutter, ISO, aperture (or f-number) and image format.
     fn settings(&mut self) -> Result<Settings, Error>;
@@ -157,12 +157,12 @@ pub trait Camera {
     /// replaced by each file's suffix as the camera names it (`frame.JPG`, and
     /// `frame.CR2` for RAW + JPEG); the command camera writes `out` as given. The shutter
     /// must be one of the camera's choices (gphoto2) and is set in the same process.
-    fn capture(&mut self, shutter: &Shutter, out: &Path) -> Result<Frame, Error>;
+    fn capture(&mut self, shutter: &Shutter, out: &Path) -> Result<Shot, Error>;
 }
 
 /// Opens the camera named by a `--camera` value: `gphoto2` (the default) or
 /// `command:TEMPLATE` (see [`CommandCamera`]). Opening starts no process.
-pub fn open(spec: &str, options: Options) -> Result<Box<dyn Camera + Send>, Error> {
+pub fn open(spec: &str, options: CameraOptions) -> Result<Box<dyn Camera + Send>, Error> {
     let spec = spec.trim();
     if spec.is_empty() || spec == "gphoto2" {
         return Ok(Box::new(Gphoto2::new(options)));

@@ -9,7 +9,7 @@ mod tools;
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};
 
-use visobjd_camera::{Error, ExposureSource, Options, Shutter, open};
+use visobjd_camera::{CameraOptions, Error, ExposureSource, Shutter, open};
 
 fn folder(name: &str) -> PathBuf {
     let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
@@ -31,7 +31,7 @@ fn a_file_without_exif_gives_the_requested_exposure_marked_assumed() {
     let source = dir.join("webcam.png");
     std::fs::write(&source, PNG).expect("png");
     let template = format!("command:cp {} {{out}}", source.display());
-    let mut camera = open(&template, Options::default()).expect("a template");
+    let mut camera = open(&template, CameraOptions::default()).expect("a template");
     let out = dir.join("light-02").join("frame.png");
     let frame = camera
         .capture(&Shutter::from_seconds(0.25).expect("0.25 s"), &out)
@@ -59,12 +59,12 @@ fn a_file_with_exif_gives_its_exposure_not_the_request() {
         "command:{} --capture-image-and-download --filename {{out}} --force-overwrite",
         fake.display()
     );
-    let options = Options {
+    let options = CameraOptions {
         env: vec![(
             OsString::from("FAKE_GPHOTO2_STATE"),
             dir.join("state.json").into_os_string(),
         )],
-        ..Options::default()
+        ..CameraOptions::default()
     };
     let mut camera = open(&template, options).expect("a template");
     let out = dir.join("frame.jpg");
@@ -81,7 +81,7 @@ fn placeholders_fill_whole_and_partial_words_without_a_shell() {
     let dir = folder("argv");
     // `touch` gets the expanded words as they are: `$HOME` and `*` stay literal.
     let template = "command:touch {out} {out}.{exposure}s {out}.$HOME*";
-    let mut camera = open(template, Options::default()).expect("a template");
+    let mut camera = open(template, CameraOptions::default()).expect("a template");
     let out = dir.join("f.png");
     let frame = camera
         .capture(&Shutter::parse("1/8").expect("1/8"), &out)
@@ -101,7 +101,7 @@ fn placeholders_fill_whole_and_partial_words_without_a_shell() {
 #[test]
 fn a_failing_command_is_a_sentence_naming_it() {
     let dir = folder("fails");
-    let mut camera = open("command:false {out}", Options::default()).expect("a template");
+    let mut camera = open("command:false {out}", CameraOptions::default()).expect("a template");
     let err = camera
         .capture(
             &Shutter::from_seconds(1.0).expect("1 s"),
@@ -111,7 +111,7 @@ fn a_failing_command_is_a_sentence_naming_it() {
     assert!(matches!(err, Error::Tool { .. }), "{err:?}");
     assert!(err.to_string().contains("`false "), "{err}");
 
-    let mut camera = open("command:true {out}", Options::default()).expect("a template");
+    let mut camera = open("command:true {out}", CameraOptions::default()).expect("a template");
     let err = camera
         .capture(
             &Shutter::from_seconds(1.0).expect("1 s"),
@@ -124,10 +124,10 @@ fn a_failing_command_is_a_sentence_naming_it() {
 #[test]
 fn templates_without_a_program_or_out_are_refused_and_it_has_no_settings() {
     for bad in ["command:", "command:   ", "command:cp a b", "webcam"] {
-        let err = open(bad, Options::default()).err().expect("refused");
+        let err = open(bad, CameraOptions::default()).err().expect("refused");
         assert!(matches!(err, Error::Spec { .. }), "{bad}: {err:?}");
     }
-    let mut camera = open("command:cp a {out}", Options::default()).expect("a template");
+    let mut camera = open("command:cp a {out}", CameraOptions::default()).expect("a template");
     assert!(matches!(camera.settings(), Err(Error::Unsupported(_))));
     assert!(matches!(
         camera.set_config("iso", "100"),

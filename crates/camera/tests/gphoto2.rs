@@ -13,13 +13,13 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Duration;
 
-use visobjd_camera::{Camera, Error, ExposureSource, Gphoto2, Options, Shutter};
+use visobjd_camera::{Camera, CameraOptions, Error, ExposureSource, Gphoto2, Shutter};
 
 /// The fake camera's folder: a `bin/gphoto2` link to the fake, its state and its log.
 struct Rig {
     dir: PathBuf,
     log: PathBuf,
-    options: Options,
+    options: CameraOptions,
 }
 
 impl Rig {
@@ -51,9 +51,9 @@ impl Rig {
             ("FAKE_GPHOTO2_LOG".into(), log.clone().into()),
         ];
         vars.extend(env.iter().map(|(k, v)| (k.into(), v.into())));
-        let options = Options {
+        let options = CameraOptions {
             env: vars,
-            ..Options::default()
+            ..CameraOptions::default()
         };
         Some(Rig { dir, log, options })
     }

@@ -10,7 +10,7 @@ use std::path::Path;
 use rayon::prelude::*;
 
 /// A frame's pixels, owned.
-pub enum Pixels {
+pub enum DecodedPixels {
     /// 8-bit RGB, interleaved.
     Jpeg(Vec<u8>),
     /// Linear 16-bit camera RGB, interleaved, with its black and white levels.
@@ -27,7 +27,7 @@ pub enum Pixels {
 }
 
 /// A decoded shot.
-pub struct Shot {
+pub struct DecodedShot {
     /// Width in pixels.
     pub width: usize,
     /// Height in pixels.
@@ -35,18 +35,18 @@ pub struct Shot {
     /// The exposure its EXIF records.
     pub exposure: visobjd_hdr::Exposure,
     /// The pixels.
-    pub pixels: Pixels,
+    pub pixels: DecodedPixels,
 }
 
-impl Shot {
+impl DecodedShot {
     /// The 99.9th percentile of the frame's samples as a fraction of full scale: how
     /// close its brightest pixels come to clipping.
     pub fn high(&self) -> f64 {
         // A histogram of the sample values, not a sorted copy: a 24-megapixel frame has
         // 72 million samples.
         let (counts, black, span) = match &self.pixels {
-            Pixels::Jpeg(p) => (histogram(p.iter().map(|&c| usize::from(c)), 256), 0, 255.0),
-            Pixels::Raw {
+            DecodedPixels::Jpeg(p) => (histogram(p.iter().map(|&c| usize::from(c)), 256), 0, 255.0),
+            DecodedPixels::Raw {
                 values,
                 black,
                 white,
@@ -74,14 +74,14 @@ impl Shot {
     }
 
     /// The shot as the merge takes it (borrowed, not copied).
-    pub fn frame(&self) -> visobjd_hdr::Frame<'_> {
-        visobjd_hdr::Frame {
+    pub fn frame(&self) -> visobjd_hdr::BracketFrame<'_> {
+        visobjd_hdr::BracketFrame {
             width: self.width,
             height: self.height,
             exposure: self.exposure,
             pixels: match &self.pixels {
-                Pixels::Jpeg(p) => visobjd_hdr::Pixels::Jpeg(p),
-                Pixels::Raw {
+                DecodedPixels::Jpeg(p) => visobjd_hdr::Pixels::Jpeg(p),
+                DecodedPixels::Raw {
                     values,
                     black,
                     white,
@@ -107,7 +107,7 @@ fn histogram(values: impl Iterator<Item = usize>, bins: usize) -> Vec<usize> {
 
 /// Reads the shot at `path` taken with `exposure` (ISO and aperture default to the
 /// session's when the file does not record them).
-pub fn load(path: &Path, exposure: visobjd_hdr::Exposure) -> Result<Shot, String> {
+pub fn load(path: &Path, exposure: visobjd_hdr::Exposure) -> Result<DecodedShot, String> {
     let ext = path
         .extension()
         .map(|e| e.to_string_lossy().to_lowercase())
@@ -120,11 +120,11 @@ pub fn load(path: &Path, exposure: visobjd_hdr::Exposure) -> Result<Shot, String
                 .decode()
                 .map_err(|e| format!("{}: not a readable JPEG: {e}", path.display()))?
                 .into_rgb8();
-            Ok(Shot {
+            Ok(DecodedShot {
                 width: img.width() as usize,
                 height: img.height() as usize,
                 exposure,
-                pixels: Pixels::Jpeg(img.into_raw()),
+                pixels: DecodedPixels::Jpeg(img.into_raw()),
             })
         }
         _ => camera_raw(path, exposure),
@@ -140,7 +140,7 @@ pub(crate) const SRGB_TO_XYZ: [[f64; 3]; 3] = [
 
 /// A camera raw file through `rawler`. Its decoders panic on some malformed files, so the
 /// decode runs inside `catch_unwind`: a bad file is a sentence, never the end of a capture.
-fn camera_raw(path: &Path, exposure: visobjd_hdr::Exposure) -> Result<Shot, String> {
+fn camera_raw(path: &Path, exposure: visobjd_hdr::Exposure) -> Result<DecodedShot, String> {
     use rawler::rawimage::{RawImageData, RawPhotometricInterpretation};
     let name = path.display();
     let hint = "capture with --format jpeg, or convert the camera's raw files to DNG";
@@ -250,11 +250,11 @@ fn camera_raw(path: &Path, exposure: visobjd_hdr::Exposure) -> Result<Shot, Stri
                 }
             }
         });
-    Ok(Shot {
+    Ok(DecodedShot {
         width: ow,
         height: oh,
         exposure,
-        pixels: Pixels::Raw {
+        pixels: DecodedPixels::Raw {
             values,
             black: 0,
             white: full as u16,
@@ -316,13 +316,13 @@ pub(crate) fn invert(m: [[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
     ])
 }
 
-impl Shot {
+impl DecodedShot {
     /// Camera RGB to linear sRGB for this shot's pixels (identity for a JPEG, which the
     /// camera already rendered in sRGB).
     pub fn to_srgb(&self) -> Option<[[f32; 3]; 3]> {
         match &self.pixels {
-            Pixels::Raw { to_srgb, .. } => Some(*to_srgb),
-            Pixels::Jpeg(_) => None,
+            DecodedPixels::Raw { to_srgb, .. } => Some(*to_srgb),
+            DecodedPixels::Jpeg(_) => None,
         }
     }
 }

@@ -23,7 +23,7 @@ use rand::{RngExt, SeedableRng};
 use serde::{Deserialize, Serialize};
 use visobjd_camera::{Camera, Shutter};
 use visobjd_compositor::basis::Precision;
-use visobjd_dmx::{Frame, Output, Patch};
+use visobjd_dmx::{Output, Patch, SlotLevels};
 use visobjd_hdr::{BracketSettings, ExposureFit, MergeSettings, Radiance, Response};
 use visobjd_scene::emitter::colour::{ciede2000, linear_srgb_to_xyz, xyz_to_lab};
 use visobjd_scene::look::{Level, Look};
@@ -67,7 +67,7 @@ impl Format {
 
 /// How to capture.
 #[derive(Debug, Clone)]
-pub struct Options {
+pub struct CaptureOptions {
     /// Channels to shoot (`--lights`); `None`: every light.
     pub lights: Option<Vec<u32>>,
     /// How long a light is given to reach its level before the first frame (lamps warm up).
@@ -222,7 +222,7 @@ struct Session<'a> {
     scene_dir: &'a Path,
     output: &'a Output,
     camera: &'a mut dyn Camera,
-    opts: &'a Options,
+    opts: &'a CaptureOptions,
     progress: &'a mut dyn Progress,
     stop: &'a AtomicBool,
     shutters: Vec<Shutter>,
@@ -245,7 +245,7 @@ pub fn capture(
     scene_dir: &Path,
     output: &Output,
     camera: &mut dyn Camera,
-    opts: &Options,
+    opts: &CaptureOptions,
     progress: &mut dyn Progress,
     stop: &AtomicBool,
 ) -> Result<Summary, CaptureError> {
@@ -265,7 +265,7 @@ pub fn capture(
             camera.set_config(&f.key, choice)?;
         }
     }
-    let number = |s: Option<&visobjd_camera::Setting>, default: f64| {
+    let number = |s: Option<&visobjd_camera::CameraSetting>, default: f64| {
         s.and_then(|s| s.current.trim_start_matches("f/").parse::<f64>().ok())
             .unwrap_or(default)
     };
@@ -323,7 +323,7 @@ impl Session<'_> {
             };
             self.show(&all, self.patch.unmastered(&all))?;
             let shots = self.response_bracket()?;
-            let frames: Vec<_> = shots.iter().map(decode::Shot::frame).collect();
+            let frames: Vec<_> = shots.iter().map(decode::DecodedShot::frame).collect();
             let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(self.opts.seed);
             self.record.response = Some(Response::recover(&frames, &mut rng)?);
             save_record(self.scene_dir, &self.record)?;
@@ -545,7 +545,7 @@ impl Session<'_> {
     /// Puts `look` on the rig as the slot levels `frame` (its [`Patch::unmastered`], or a
     /// light's emitter alone: [`Patch::emitter_alone`]) and waits for the lamps and for
     /// frames that carry it.
-    fn show(&mut self, look: &Look, frame: Frame) -> Result<(), CaptureError> {
+    fn show(&mut self, look: &Look, frame: SlotLevels) -> Result<(), CaptureError> {
         let started = Instant::now();
         self.output.set_frame(look.clone(), frame);
         let ticks = self.output.stats().ticks;
@@ -564,7 +564,7 @@ impl Session<'_> {
     }
 
     /// One frame at `shutter`, decoded; its file is removed once read.
-    fn shoot(&mut self, shutter: &Shutter) -> Result<decode::Shot, CaptureError> {
+    fn shoot(&mut self, shutter: &Shutter) -> Result<decode::DecodedShot, CaptureError> {
         if self.stop.load(Ordering::SeqCst) {
             return Err(CaptureError::Stopped);
         }
@@ -612,7 +612,7 @@ impl Session<'_> {
     }
 
     /// Seven frames a stop apart around the metered exposure, for the camera response.
-    fn response_bracket(&mut self) -> Result<Vec<decode::Shot>, CaptureError> {
+    fn response_bracket(&mut self) -> Result<Vec<decode::DecodedShot>, CaptureError> {
         let (_, t) = self.meter()?;
         let mut shots = Vec::new();
         for k in -3..=3 {
@@ -629,7 +629,7 @@ impl Session<'_> {
     /// A metering frame whose brightest pixels (the 99.9th percentile) sit high but
     /// unclipped, found from 1/60 s by trial (the camera's response may not be known
     /// yet, so the frame's own values are read); with its exposure time.
-    fn meter(&mut self) -> Result<(decode::Shot, f64), CaptureError> {
+    fn meter(&mut self) -> Result<(decode::DecodedShot, f64), CaptureError> {
         let (shortest, longest) = self.shutters_range();
         let longest = longest.min(LONGEST);
         let mut t = 1.0 / 60.0;
@@ -669,7 +669,7 @@ impl Session<'_> {
     fn shoot_look(
         &mut self,
         look: &Look,
-        frame: Frame,
+        frame: SlotLevels,
         dark: bool,
     ) -> Result<visobjd_hdr::Merged, CaptureError> {
         self.show(look, frame)?;
@@ -700,20 +700,20 @@ impl Session<'_> {
         for t in times {
             shots.push(self.shoot(&self.nearest(t))?);
         }
-        let frames: Vec<_> = shots.iter().map(decode::Shot::frame).collect();
+        let frames: Vec<_> = shots.iter().map(decode::DecodedShot::frame).collect();
         let settings = MergeSettings {
             width: Some(self.opts.width),
             ..MergeSettings::default()
         };
         let mut merged = visobjd_hdr::merge(&frames, response.as_ref(), &settings)?;
-        if let Some(m) = shots.first().and_then(decode::Shot::to_srgb) {
+        if let Some(m) = shots.first().and_then(decode::DecodedShot::to_srgb) {
             merged.radiance.transform(m);
         }
         Ok(merged)
     }
 
     /// The bytes light `l`'s slots are sent in `frame` (unmastered levels).
-    fn dmx_of(&self, l: usize, frame: &Frame) -> (u16, u16, Vec<u8>) {
+    fn dmx_of(&self, l: usize, frame: &SlotLevels) -> (u16, u16, Vec<u8>) {
         let patch = &self.patch;
         let bytes = patch.quantise(frame);
         let light = &self.scene.lights[l];

@@ -24,7 +24,7 @@ use rand::SeedableRng;
 use rand::rngs::Xoshiro256PlusPlus;
 use rand_distr::{Distribution, Normal};
 use visobjd_camera::{
-    Camera, Description, Error, ExposureSource, Frame, Setting, Settings, Shutter,
+    Camera, CameraSetting, Description, Error, ExposureSource, Settings, Shot, Shutter,
 };
 use visobjd_dmx::Patch;
 use visobjd_dmx::patch::SLOTS;
@@ -435,7 +435,7 @@ impl Camera for SimCamera {
         })
     }
 
-    fn config(&mut self, key: &str) -> Result<Setting, Error> {
+    fn config(&mut self, key: &str) -> Result<CameraSetting, Error> {
         let (label, current, choices): (&str, String, Vec<String>) = match key {
             "shutterspeed" => (
                 "Shutter Speed",
@@ -455,7 +455,7 @@ impl Camera for SimCamera {
                 )));
             }
         };
-        Ok(Setting {
+        Ok(CameraSetting {
             key: key.into(),
             label: label.into(),
             readonly: false,
@@ -497,7 +497,7 @@ impl Camera for SimCamera {
         Ok(())
     }
 
-    fn capture(&mut self, shutter: &Shutter, out: &Path) -> Result<Frame, Error> {
+    fn capture(&mut self, shutter: &Shutter, out: &Path) -> Result<Shot, Error> {
         self.receive()?;
         self.shutter = shutter.text().to_string();
         let seconds = shutter.seconds();
@@ -514,7 +514,7 @@ impl Camera for SimCamera {
             path: path.clone(),
             problem: "the sim wrote no exposure".into(),
         })?;
-        Ok(Frame {
+        Ok(Shot {
             paths: vec![path],
             exposure,
             source: ExposureSource::Exif,

@@ -14,7 +14,7 @@ pub mod input;
 pub mod patch;
 mod wire;
 
-pub use patch::{Frame, Patch};
+pub use patch::{Patch, SlotLevels};
 
 pub use config::{ArtnetDest, InputConfig, OutputConfig, SacnDest, SacnInput};
 pub use input::Input;
@@ -34,6 +34,7 @@ use uuid::Uuid;
 use crate::patch::SLOTS;
 use config::SacnTarget;
 use visobjd_scene::look::Look;
+use visobjd_throttle::Throttle;
 use wire::SacnSource;
 
 /// Why the output could not start.
@@ -69,7 +70,7 @@ struct Desired {
     look: Arc<Look>,
     /// Slot levels that stand for the look (`Output::set_frame`: capture shooting one
     /// emitter alone, which no look asks for); `None`: the look's own.
-    frame: Option<Arc<Frame>>,
+    frame: Option<Arc<SlotLevels>>,
     /// Bumped by every `set_look`, so the clock sees a new target even if equal.
     generation: u64,
     fade: Duration,
@@ -318,7 +319,7 @@ impl Output {
     /// [`Patch::emitter_alone`] makes them) on the wire at once, standing for `look`
     /// until the next [`Output::set_look`]: what capture uses to light one emitter alone,
     /// or a look solved through another patch.
-    pub fn set_frame(&self, look: Look, frame: Frame) {
+    pub fn set_frame(&self, look: Look, frame: SlotLevels) {
         let (look, frame) = (Arc::new(look), Arc::new(frame));
         self.desired.send_modify(|d| {
             d.look = look;
@@ -459,46 +460,22 @@ impl Route {
             counters.destinations[self.errors]
                 .1
                 .fetch_add(1, Ordering::Relaxed);
-            self.log.error(now, self.protocol, to, &e);
+            send_failed(&mut self.log, now, self.protocol, to, &e);
         }
     }
 }
 
-/// Rate-limits a kind of log line to one per 10 s (send errors per destination, malformed
-/// input packets), counting the ones left out.
-#[derive(Debug, Default)]
-pub(crate) struct Throttle {
-    last: Option<Instant>,
-    suppressed: u64,
-}
-
-impl Throttle {
-    const EVERY: Duration = Duration::from_secs(10);
-
-    /// `Some(lines left out since the last one)` when a line may be logged at `now`.
-    pub(crate) fn allow(&mut self, now: Instant) -> Option<u64> {
-        match self.last {
-            Some(last) if now.duration_since(last) < Self::EVERY => {
-                self.suppressed += 1;
-                None
-            }
-            _ => {
-                self.last = Some(now);
-                Some(std::mem::take(&mut self.suppressed))
-            }
-        }
-    }
-
-    fn error(&mut self, now: Instant, protocol: &str, to: SocketAddr, error: &str) {
-        if let Some(suppressed) = self.allow(now) {
-            tracing::warn!(
-                protocol,
-                destination = %to,
-                error,
-                suppressed,
-                "DMX send failed (further failures to this destination are logged at most every 10 s)"
-            );
-        }
+/// Logs a failed send to `to` through its destination's throttle: one line per 10 s at
+/// most, with the count of failures left out since the last.
+fn send_failed(log: &mut Throttle, now: Instant, protocol: &str, to: SocketAddr, error: &str) {
+    if let Some(suppressed) = log.allow(now) {
+        tracing::warn!(
+            protocol,
+            destination = %to,
+            error,
+            suppressed,
+            "DMX send failed (further failures to this destination are logged at most every 10 s)"
+        );
     }
 }
 
@@ -611,8 +588,8 @@ struct Clock {
     keepalive: bool,
     rx: watch::Receiver<Desired>,
     generation: u64,
-    from: Frame,
-    target: Frame,
+    from: SlotLevels,
+    target: SlotLevels,
     fade_start: Instant,
     fade: Duration,
     master: f32,
@@ -698,13 +675,13 @@ impl Clock {
     }
 
     /// The unmastered levels at `now`.
-    fn levels_at(&self, now: Instant) -> Frame {
+    fn levels_at(&self, now: Instant) -> SlotLevels {
         let elapsed = now.saturating_duration_since(self.fade_start);
         if self.fade.is_zero() || elapsed >= self.fade {
             self.target.clone()
         } else {
             let t = elapsed.as_secs_f32() / self.fade.as_secs_f32();
-            Frame::crossfade(&self.from, &self.target, t)
+            SlotLevels::crossfade(&self.from, &self.target, t)
         }
     }
 
@@ -959,24 +936,5 @@ pub fn kernel_arrival(sock: &UdpSocket, now: Instant) -> Instant {
     match SystemTime::now().duration_since(stamp) {
         Ok(age) if r == 0 && age < Duration::from_secs(5) => now.checked_sub(age).unwrap_or(now),
         _ => now,
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn send_errors_are_logged_once_per_ten_seconds() {
-        let mut log = Throttle::default();
-        let to: SocketAddr = "127.0.0.1:6454".parse().expect("addr");
-        let t0 = Instant::now();
-        log.error(t0, "Art-Net", to, "first");
-        log.error(t0 + Duration::from_secs(1), "Art-Net", to, "quiet");
-        log.error(t0 + Duration::from_secs(9), "Art-Net", to, "quiet");
-        assert_eq!((log.last, log.suppressed), (Some(t0), 2));
-        let t1 = t0 + Duration::from_secs(10);
-        log.error(t1, "Art-Net", to, "again");
-        assert_eq!((log.last, log.suppressed), (Some(t1), 0));
     }
 }

@@ -43,7 +43,11 @@ impl Placed {
     /// Writes this light's slots into `frame`: `value(slot, k)` per slot in order, `k` the
     /// slot's place among the light's additive emitters (`None` for other slots); `None`
     /// leaves the slot as it is. Slots past the universe's end are dropped.
-    fn write(&self, frame: &mut Frame, mut value: impl FnMut(Slot, Option<usize>) -> Option<f32>) {
+    fn write(
+        &self,
+        frame: &mut SlotLevels,
+        mut value: impl FnMut(Slot, Option<usize>) -> Option<f32>,
+    ) {
         let base = self.universe * SLOTS;
         let (mut at, mut emitters) = (self.offset, 0);
         for &slot in &self.slots {
@@ -76,20 +80,20 @@ pub struct Patch {
 /// before quantisation. The coarse slot of a 16-bit pair holds the pair's whole level;
 /// its fine slot is unused until [`Patch::quantise`].
 #[derive(Debug, Clone, PartialEq)]
-pub struct Frame {
+pub struct SlotLevels {
     levels: Vec<f32>,
 }
 
-impl Frame {
+impl SlotLevels {
     /// The levels of universe number `index` (an index into [`Patch::universes`]).
     pub fn universe(&self, index: usize) -> &[f32] {
         &self.levels[index * SLOTS..(index + 1) * SLOTS]
     }
 
     /// Linear crossfade of every slot: `from` at `t = 0`, `to` at `t = 1`.
-    pub fn crossfade(from: &Frame, to: &Frame, t: f32) -> Frame {
+    pub fn crossfade(from: &SlotLevels, to: &SlotLevels, t: f32) -> SlotLevels {
         let t = unit(t);
-        Frame {
+        SlotLevels {
             levels: from
                 .levels
                 .iter()
@@ -157,14 +161,14 @@ impl Patch {
     }
 
     /// Every slot 0, fixed slots included: what blackout sends.
-    pub fn blackout(&self) -> Frame {
-        Frame {
+    pub fn blackout(&self) -> SlotLevels {
+        SlotLevels {
             levels: vec![0.0; self.universes.len() * SLOTS],
         }
     }
 
     /// The slot levels `look` asks for with the grand master at `master`.
-    pub fn levels(&self, look: &Look, master: f32) -> Frame {
+    pub fn levels(&self, look: &Look, master: f32) -> SlotLevels {
         self.mastered(&self.unmastered(look), master)
     }
 
@@ -177,7 +181,7 @@ impl Patch {
     /// (`Solution::at`); `cyan`/`magenta`/`yellow` are 1 - r/g/b of the linear colour (the
     /// intensity folded in without a dimmer); `uv` is 0 and `fixed:N` is N. A light missing
     /// from the look is off.
-    pub fn unmastered(&self, look: &Look) -> Frame {
+    pub fn unmastered(&self, look: &Look) -> SlotLevels {
         let mut frame = self.blackout();
         for (i, light) in self.lights.iter().enumerate() {
             let level = look.levels.get(i).copied().unwrap_or(Level::OFF);
@@ -212,7 +216,7 @@ impl Patch {
     /// The slot levels of `look` at master 1 with light `light`'s additive emitter
     /// `emitter` (slot order) alone at full and its other emitters at 0, its dimmer (if it
     /// has one) at full: how capture shoots one emitter's basis image.
-    pub fn emitter_alone(&self, look: &Look, light: usize, emitter: usize) -> Frame {
+    pub fn emitter_alone(&self, look: &Look, light: usize, emitter: usize) -> SlotLevels {
         let mut frame = self.unmastered(look);
         if let Some(placed) = self.lights.get(light) {
             placed.write(&mut frame, |slot, k| match k {
@@ -225,7 +229,7 @@ impl Patch {
 
     /// `frame` (unmastered levels) with the grand master applied to the slots that carry
     /// intensity.
-    pub fn mastered(&self, frame: &Frame, master: f32) -> Frame {
+    pub fn mastered(&self, frame: &SlotLevels, master: f32) -> SlotLevels {
         let m = unit(master);
         let levels = frame
             .levels
@@ -237,12 +241,12 @@ impl Patch {
                 Rule::Complement => 1.0 - (1.0 - v) * m,
             })
             .collect();
-        Frame { levels }
+        SlotLevels { levels }
     }
 
     /// DMX bytes, one 512-slot buffer per universe: 8-bit slots round `level * 255`; a
     /// 16-bit pair takes `v = round(level * 65535)` as coarse `v >> 8`, fine `v & 255`.
-    pub fn quantise(&self, frame: &Frame) -> Vec<[u8; SLOTS]> {
+    pub fn quantise(&self, frame: &SlotLevels) -> Vec<[u8; SLOTS]> {
         (0..self.universes.len())
             .map(|u| {
                 let levels = frame.universe(u);
@@ -276,7 +280,7 @@ impl Patch {
     /// in `frame` (unmastered levels), at DMX precision: `byte / 255`, or `value / 65535`
     /// for a 16-bit pair. What a console export writes, so its preset and the wire can
     /// never disagree.
-    pub fn light_slots(&self, frame: &Frame) -> Vec<Vec<(Slot, f32)>> {
+    pub fn light_slots(&self, frame: &SlotLevels) -> Vec<Vec<(Slot, f32)>> {
         self.lights
             .iter()
             .map(|light| {
@@ -624,8 +628,8 @@ mod tests {
         let patch = Patch::new(&scene);
         let a = patch.unmastered(&look(&scene, 0.2, [0.3, 0.9, 1.0]));
         let b = patch.unmastered(&look(&scene, 0.9, [1.0, 0.2, 0.4]));
-        let x = patch.mastered(&Frame::crossfade(&a, &b, 0.3), 0.6);
-        let y = Frame::crossfade(&patch.mastered(&a, 0.6), &patch.mastered(&b, 0.6), 0.3);
+        let x = patch.mastered(&SlotLevels::crossfade(&a, &b, 0.3), 0.6);
+        let y = SlotLevels::crossfade(&patch.mastered(&a, 0.6), &patch.mastered(&b, 0.6), 0.3);
         for (p, q) in x.levels.iter().zip(&y.levels) {
             assert!((p - q).abs() < 1e-6);
         }
@@ -636,13 +640,13 @@ mod tests {
         let scene = scene();
         let patch = Patch::new(&scene);
         let on = patch.levels(&look(&scene, 1.0, [1.0; 3]), 1.0);
-        let mid = patch.quantise(&Frame::crossfade(&patch.blackout(), &on, 0.5));
+        let mid = patch.quantise(&SlotLevels::crossfade(&patch.blackout(), &on, 0.5));
         assert_eq!(bytes_of(&mid, 0, 1), [128]);
         // The 16-bit pair fades as one number: 0.5 -> 32768, not (128, 128).
         assert_eq!(bytes_of(&mid, 1, 2), [128, 0]);
-        assert_eq!(Frame::crossfade(&patch.blackout(), &on, 1.0), on);
+        assert_eq!(SlotLevels::crossfade(&patch.blackout(), &on, 1.0), on);
         assert_eq!(
-            Frame::crossfade(&patch.blackout(), &on, 0.0),
+            SlotLevels::crossfade(&patch.blackout(), &on, 0.0),
             patch.blackout()
         );
     }

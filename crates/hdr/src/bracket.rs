@@ -3,7 +3,7 @@
 //! useful pixels rise well above the noise, steps no wider than the merge can bridge.
 
 use crate::frame::{Pixels, check_bracket};
-use crate::{Frame, HdrError, Response};
+use crate::{BracketFrame, HdrError, Response};
 
 /// How to choose a bracket. Defaults are the settled values in `docs/capture.md`.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -63,7 +63,7 @@ pub struct Bracket {
 /// Proposes exposure times from a metering frame. `response` is needed for JPEG.
 /// `shutter_choices` are the camera's available times in seconds (any order).
 pub fn propose_bracket(
-    meter: &Frame<'_>,
+    meter: &BracketFrame<'_>,
     response: Option<&Response>,
     shutter_choices: &[f64],
     settings: &BracketSettings,

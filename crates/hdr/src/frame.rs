@@ -71,7 +71,7 @@ impl Pixels<'_> {
 
 /// One frame of a bracket.
 #[derive(Debug, Clone, Copy)]
-pub struct Frame<'a> {
+pub struct BracketFrame<'a> {
     /// Width in pixels.
     pub width: usize,
     /// Height in pixels.
@@ -83,7 +83,7 @@ pub struct Frame<'a> {
 }
 
 /// Checks a bracket (sizes, kinds, exposures, levels); returns the relative exposures.
-pub(crate) fn check_bracket(frames: &[Frame<'_>]) -> Result<Vec<f64>, HdrError> {
+pub(crate) fn check_bracket(frames: &[BracketFrame<'_>]) -> Result<Vec<f64>, HdrError> {
     let first = frames.first().ok_or(HdrError::NoFrames)?;
     let mut rel = Vec::with_capacity(frames.len());
     for (i, f) in frames.iter().enumerate() {

@@ -28,7 +28,7 @@ pub use ambient::{AmbientDrift, LightTest, ambient_drift, light_test, subtract_a
 pub use bracket::{Bracket, BracketSettings, propose_bracket};
 pub use error::HdrError;
 pub use exr_out::{encode_exr, write_exr};
-pub use frame::{Exposure, Frame, Pixels};
+pub use frame::{BracketFrame, Exposure, Pixels};
 pub use merge::{ExposureFit, MergeSettings, Merged, merge};
 pub use resample::{downsample, scaled_size};
 pub use response::Response;

@@ -7,7 +7,7 @@ use rayon::prelude::*;
 
 use crate::frame::{Pixels, check_bracket};
 use crate::resample::{add_row, owner, scaled_size, taps};
-use crate::{Frame, HdrError, Radiance, Response};
+use crate::{BracketFrame, HdrError, Radiance, Response};
 
 /// How to merge. The defaults are the settled values documented in `docs/capture.md`.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -113,7 +113,7 @@ enum Lin<'a> {
 /// frame above the floor takes the longest unclipped frame's value; a pixel clipped in
 /// every frame takes the shortest frame's value and is counted.
 pub fn merge(
-    frames: &[Frame<'_>],
+    frames: &[BracketFrame<'_>],
     response: Option<&Response>,
     settings: &MergeSettings,
 ) -> Result<Merged, HdrError> {
@@ -197,7 +197,12 @@ pub fn merge(
 }
 
 /// The linearisation of one frame at fitted exposure `t`.
-fn lin<'a>(frame: &Frame<'a>, response: Option<&Response>, s: &MergeSettings, t: f64) -> Lin<'a> {
+fn lin<'a>(
+    frame: &BracketFrame<'a>,
+    response: Option<&Response>,
+    s: &MergeSettings,
+    t: f64,
+) -> Lin<'a> {
     match frame.pixels {
         Pixels::Raw {
             values,
@@ -345,7 +350,7 @@ fn shortest_value(l: &Lin<'_>, i: usize) -> [f32; 3] {
 /// exposure order from the samples both see well (ratio of sums after a median-based
 /// outlier cut), chained outward from the reference frame, which keeps its EXIF value.
 fn fit_exposures(
-    frames: &[Frame<'_>],
+    frames: &[BracketFrame<'_>],
     response: Option<&Response>,
     s: &MergeSettings,
     nominal: &[f64],
@@ -381,7 +386,7 @@ fn fit_exposures(
 /// Linear value (fraction of full scale) of sample `i` of a frame, and whether its pixel
 /// is clipped.
 fn sample(
-    f: &Frame<'_>,
+    f: &BracketFrame<'_>,
     response: Option<&Response>,
     s: &MergeSettings,
     p: usize,
@@ -415,8 +420,8 @@ const FIT_PIXELS: usize = 300_000;
 
 /// exposure(b) / exposure(a) from pixels both frames see well, and the samples used.
 fn pair_ratio(
-    a: &Frame<'_>,
-    b: &Frame<'_>,
+    a: &BracketFrame<'_>,
+    b: &BracketFrame<'_>,
     response: Option<&Response>,
     s: &MergeSettings,
 ) -> Option<(f64, usize)> {

@@ -11,7 +11,7 @@
 use rand::{Rng, RngExt};
 
 use crate::frame::{Pixels, check_bracket};
-use crate::{Frame, HdrError};
+use crate::{BracketFrame, HdrError};
 
 /// The camera's inverse response `g`: for each channel, JPEG code 0..=255 to linear value,
 /// normalised so `g(255) = 1` (full scale). Non-decreasing.
@@ -69,7 +69,7 @@ impl Response {
     /// frames are fitted along with the curve (EXIF fixes only their overall scale and
     /// spread), so EXIF errors of a few percent in single frames do not bend it;
     /// [`crate::merge`] refits the ratios of every bracket it merges anyway.
-    pub fn recover(frames: &[Frame<'_>], rng: &mut impl Rng) -> Result<Response, HdrError> {
+    pub fn recover(frames: &[BracketFrame<'_>], rng: &mut impl Rng) -> Result<Response, HdrError> {
         let rel = check_bracket(frames)?;
         let codes: Vec<&[u8]> = frames
             .iter()

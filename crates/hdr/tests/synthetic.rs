@@ -39,11 +39,11 @@ fn jpeg_shot(map: &[[f32; 3]], seed: u64) -> Shot<u8> {
     Shot { truth, exif, data }
 }
 
-fn raw_frames(s: &Shot<u16>) -> Vec<Frame<'_>> {
+fn raw_frames(s: &Shot<u16>) -> Vec<BracketFrame<'_>> {
     raw_frames_of(&s.data, &s.exif, W, H)
 }
 
-fn jpeg_frames(s: &Shot<u8>) -> Vec<Frame<'_>> {
+fn jpeg_frames(s: &Shot<u8>) -> Vec<BracketFrame<'_>> {
     jpeg_frames_of(&s.data, &s.exif, W, H)
 }
 
@@ -337,7 +337,7 @@ fn bracket_choice_covers_the_range() {
     let choices: Vec<f64> = (0..=48).map(|k| 30.0 / 2f64.powf(k as f64 / 3.0)).collect();
     let meter_t = 1.0 / 1000.0;
     let meter = raw_frame(&map, W, meter_t, 20);
-    let frame = Frame {
+    let frame = BracketFrame {
         width: W,
         height: H,
         exposure: exif(meter_t),
@@ -388,7 +388,7 @@ fn bracket_choice_covers_the_range() {
     // Clipped meter: flagged, starts at the shortest choice.
     let clipped_meter = raw_frame(&map, W, 0.1, 21);
     let b2 = propose_bracket(
-        &Frame {
+        &BracketFrame {
             exposure: exif(0.1),
             pixels: Pixels::Raw {
                 values: &clipped_meter,
@@ -506,7 +506,7 @@ fn the_exr_reads_back() {
 fn bad_input_is_an_error_not_a_panic() {
     let a = vec![0u16; 30];
     let b = vec![0u16; 27];
-    let f = |v: &'static [u16]| Frame {
+    let f = |v: &'static [u16]| BracketFrame {
         width: 5,
         height: 2,
         exposure: exif(0.01),
@@ -527,7 +527,7 @@ fn bad_input_is_an_error_not_a_panic() {
         Err(HdrError::NoFrames)
     ));
     let codes = vec![0u8; 30];
-    let j = Frame {
+    let j = BracketFrame {
         width: 5,
         height: 2,
         exposure: exif(0.01),

@@ -16,19 +16,19 @@ use visobjd_compositor::color::srgb_to_lab;
 use visobjd_scene::look::Look;
 use visobjd_scene::srgb::{linear_to_srgb, srgb_to_linear};
 
-/// The rig as the sampler sees it.
+/// The lights as the sampler sees them: each group's lights, and which can change colour.
 #[derive(Debug, Clone)]
-pub struct Rig {
+pub struct LightGroups {
     /// Light indices per group.
     pub groups: Vec<Vec<usize>>,
     /// Per light: whether its profile can change colour.
     pub colored: Vec<bool>,
 }
 
-impl Rig {
+impl LightGroups {
     /// The sampler's view of a scene.
-    pub fn new(scene: &visobjd_scene::Scene) -> Rig {
-        Rig {
+    pub fn new(scene: &visobjd_scene::Scene) -> LightGroups {
+        LightGroups {
             groups: scene.groups.iter().map(|g| g.lights.clone()).collect(),
             colored: (0..scene.lights.len())
                 .map(|l| scene.profile(l).has_colour())
@@ -67,7 +67,7 @@ pub struct Constraints {
 
 impl Constraints {
     /// No locks, no designated keys, group granularity.
-    pub fn none(rig: &Rig) -> Constraints {
+    pub fn none(rig: &LightGroups) -> Constraints {
         Constraints {
             locked: vec![false; rig.colored.len()],
             keys: vec![false; rig.groups.len()],
@@ -170,7 +170,7 @@ impl Plan {
     /// regions first so that a region inside another wins the lights both select. Lights
     /// held off count as locked at 0; ratios and saturation ranges apply after sampling.
     pub fn new(
-        rig: &Rig,
+        rig: &LightGroups,
         constraints: &Constraints,
         targets: &[Target],
         base: &Look,
@@ -262,7 +262,7 @@ pub fn key_count(bright: f32, units: usize) -> usize {
     ((bright * units as f32 / 2.0).round() as usize).min(units)
 }
 
-fn units(rig: &Rig, constraints: &Constraints, t: &Target) -> Vec<Vec<usize>> {
+fn units(rig: &LightGroups, constraints: &Constraints, t: &Target) -> Vec<Vec<usize>> {
     let selected = |l: &usize| t.selected[*l];
     if constraints.per_light {
         (0..rig.colored.len())
@@ -336,7 +336,7 @@ fn intensity_step(
 }
 
 fn color_step(
-    rig: &Rig,
+    rig: &LightGroups,
     constraints: &Constraints,
     t: &Target,
     all_units: &[Vec<usize>],

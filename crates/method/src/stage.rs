@@ -5,7 +5,7 @@ use std::path::Path;
 
 use crate::gallery::{Generation, PROXY_WIDTH, Size};
 use crate::objective::Objective;
-use crate::sampler::{Constraints, Plan, Rig, Spread, Target};
+use crate::sampler::{Constraints, LightGroups, Plan, Spread, Target};
 use crate::targeting::{Footprints, WORKING_WIDTH};
 use visobjd_compositor::basis::{self, BasisImages, Precision};
 use visobjd_compositor::render::{exposure_gain, render_srgb8};
@@ -28,7 +28,7 @@ pub struct Stage {
     /// The scene description.
     pub scene: Scene,
     /// The sampler's view of the rig.
-    pub rig: Rig,
+    pub rig: LightGroups,
     /// Region targeting and brightness normalisation data.
     pub footprints: Footprints,
     /// Basis images at proxy size (clustering distances).
@@ -64,7 +64,7 @@ impl Stage {
         let proxy = sizes.pop().expect("three sizes asked");
         let working = sizes.pop().expect("three sizes asked");
         Ok(Stage {
-            rig: Rig::new(&scene),
+            rig: LightGroups::new(&scene),
             footprints: Footprints::new(&working),
             gain: exposure_gain(scene.exposure),
             scene,
@@ -194,7 +194,7 @@ mod tests {
             .collect();
         let at = |precision| BasisImages::from_planes(w, h, lights, &planes, precision);
         Stage {
-            rig: Rig::new(&scene),
+            rig: LightGroups::new(&scene),
             footprints: Footprints::new(&at(Precision::Single)),
             gain: exposure_gain(scene.exposure),
             scene,

@@ -71,7 +71,9 @@ use std::time::Instant;
 
 use serde::Serialize;
 
-pub use rig::{BoxProp, Camera, Cyc, CylinderProp, Legs, Light, Rig, SphereProp, Stage};
+pub use rig::{
+    BoxProp, Cyc, CylinderProp, Legs, Room, SphereProp, Spotlight, Viewpoint, VirtualStage,
+};
 
 /// What `synth` produced, for the command line to print.
 #[derive(Debug, Clone, PartialEq)]
@@ -141,7 +143,7 @@ pub fn synth(rig: &Path, out: &Path) -> Result<SynthReport, SynthError> {
         path: rig.to_path_buf(),
         source,
     })?;
-    let parsed = Rig::parse(&text).map_err(|e| SynthError::Rig {
+    let parsed = VirtualStage::parse(&text).map_err(|e| SynthError::Rig {
         path: rig.to_path_buf(),
         source: Box::new(e),
     })?;
@@ -181,7 +183,7 @@ pub fn synth(rig: &Path, out: &Path) -> Result<SynthReport, SynthError> {
 ///
 /// # Panics
 /// If `light` is out of range.
-pub fn render_light(rig: &Rig, light: usize) -> Vec<[f32; 3]> {
+pub fn render_light(rig: &VirtualStage, light: usize) -> Vec<[f32; 3]> {
     render::Renderer::new(rig).render(&rig.lights[light])
 }
 
@@ -245,7 +247,7 @@ struct LightEntry {
 }
 
 /// Writes `scene.toml` with the groups in order of first use.
-fn write_scene(out: &Path, rig: &Rig, light: Vec<LightEntry>) -> Result<(), SynthError> {
+fn write_scene(out: &Path, rig: &VirtualStage, light: Vec<LightEntry>) -> Result<(), SynthError> {
     let mut group: Vec<GroupEntry> = Vec::new();
     for g in rig.lights.iter().filter_map(|l| l.group.as_ref()) {
         if !group.iter().any(|e| &e.name == g) {

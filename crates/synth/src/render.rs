@@ -6,7 +6,7 @@ use visobjd_scene::srgb::srgb_to_linear;
 
 use rayon::prelude::*;
 
-use super::rig::{Light, Rig};
+use super::rig::{Spotlight, VirtualStage};
 use super::trace::{Geometry, Surface, V3, orthonormal};
 
 /// Subpixel sample positions (rotated grid): cheap antialiasing, identical on every run.
@@ -46,7 +46,7 @@ struct Spot {
 }
 
 impl Spot {
-    fn new(l: &Light) -> Spot {
+    fn new(l: &Spotlight) -> Spot {
         let half_beam = l.beam.to_radians() / 2.0;
         let half_field = l.field.to_radians() / 2.0;
         let gel = l.gel.unwrap_or([1.0; 3]).map(srgb_to_linear);
@@ -87,7 +87,7 @@ struct Vpl {
 
 impl Renderer {
     /// Traces the camera rays of a checked rig.
-    pub fn new(rig: &Rig) -> Renderer {
+    pub fn new(rig: &VirtualStage) -> Renderer {
         let geometry = Geometry::new(rig);
         let (w, h) = (rig.width as usize, rig.height as usize);
         let cam = &rig.camera;
@@ -117,7 +117,7 @@ impl Renderer {
     }
 
     /// Linear RGB radiance (times the exposure scale) of the stage lit by `light` alone, row-major.
-    pub fn render(&self, light: &Light) -> Vec<[f32; 3]> {
+    pub fn render(&self, light: &Spotlight) -> Vec<[f32; 3]> {
         let spot = Spot::new(light);
         let vpls = self.bounce_lights(&spot);
         let n = SUBPIXELS.len();

@@ -8,7 +8,7 @@ use super::SynthError;
 /// file format). Fields are public so tests and tools can move things around after parsing.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct Rig {
+pub struct VirtualStage {
     /// Scene name, copied to `scene.toml`.
     pub name: String,
     /// Basis image width in pixels.
@@ -20,9 +20,9 @@ pub struct Rig {
     #[serde(default)]
     pub exposure: f32,
     /// The room.
-    pub stage: Stage,
+    pub stage: Room,
     /// The viewpoint every basis image shares.
-    pub camera: Camera,
+    pub camera: Viewpoint,
     /// Box props (platforms, steps, tables).
     #[serde(default, rename = "box")]
     pub boxes: Vec<BoxProp>,
@@ -34,14 +34,15 @@ pub struct Rig {
     pub spheres: Vec<SphereProp>,
     /// The lights, in the order their basis images are numbered.
     #[serde(default, rename = "light")]
-    pub lights: Vec<Light>,
+    pub lights: Vec<Spotlight>,
 }
 
 /// The stage floor (y = 0, x centred on 0, z from 0 at the downstage edge to `depth`), with
 /// an optional cyclorama or back wall and optional side masking.
 #[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Stage {
+// A type error names the `[stage]` table as it always has: "expected struct Stage".
+#[serde(deny_unknown_fields, expecting = "struct Stage")]
+pub struct Room {
     /// Floor width in metres (x from -width/2 to width/2).
     pub width: f32,
     /// Floor depth in metres (z from 0 to depth).
@@ -84,8 +85,9 @@ pub struct Legs {
 
 /// A pinhole camera; up is +y.
 #[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Camera {
+// A type error names the `[camera]` table as it always has: "expected struct Camera".
+#[serde(deny_unknown_fields, expecting = "struct Camera")]
+pub struct Viewpoint {
     /// Eye position in metres.
     pub position: [f32; 3],
     /// Point the camera looks at.
@@ -144,8 +146,9 @@ pub struct SphereProp {
 
 /// A spotlight with a soft-edged cone, patched like a real fixture.
 #[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Light {
+// A type error names the `[[light]]` table as it always has: "expected struct Light".
+#[serde(deny_unknown_fields, expecting = "struct Light")]
+pub struct Spotlight {
     /// Console channel number, unique, copied to `scene.toml`.
     pub channel: u32,
     /// Label, copied to `scene.toml`.
@@ -166,7 +169,7 @@ pub struct Light {
     pub beam: f32,
     /// Full angle in degrees at which the beam has faded to zero (>= beam).
     pub field: f32,
-    /// Luminous intensity on the axis (candela-like; see `Rig::exposure`).
+    /// Luminous intensity on the axis (candela-like; see `VirtualStage::exposure`).
     pub intensity: f32,
     /// Gel colour, sRGB 0..1, for conventional (`dimmer`, `dimmer16`) fixtures only: colour
     /// mixing fixtures are captured white and coloured at render time.
@@ -178,10 +181,10 @@ pub struct Light {
 const MAX_SIDE: u32 = 8192;
 const MAX_PIXELS: u64 = 3840 * 2160;
 
-impl Rig {
+impl VirtualStage {
     /// Parses and checks a rig file's text, so that rendering never meets a degenerate value.
-    pub fn parse(text: &str) -> Result<Rig, SynthError> {
-        let rig: Rig = toml::from_str(text).map_err(|e| {
+    pub fn parse(text: &str) -> Result<VirtualStage, SynthError> {
+        let rig: VirtualStage = toml::from_str(text).map_err(|e| {
             let line = e.span().map_or(1, |s| {
                 text[..s.start.min(text.len())].matches('\n').count() + 1
             });

@@ -3,7 +3,7 @@
 
 use std::ops::{Add, Mul, Neg, Sub};
 
-use super::rig::Rig;
+use super::rig::VirtualStage;
 
 /// A 3-vector in metres (or a direction).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -135,7 +135,7 @@ pub(crate) struct Geometry {
 
 impl Geometry {
     /// Builds the floor, cyc, legs and props of a checked rig.
-    pub fn new(rig: &Rig) -> Geometry {
+    pub fn new(rig: &VirtualStage) -> Geometry {
         let s = &rig.stage;
         let hw = s.width / 2.0;
         let mut objects = Vec::new();

@@ -19,7 +19,7 @@ use anyhow::{Context, bail};
 use rosc::{OscMessage, OscPacket, OscType};
 use visobjd_rig::eos::{self, Arg, EosChannel, EosGroup, EosPatch, Lists, Piece, Reply};
 
-use crate::osc::framing::{self, Decoder, Frame, Framing};
+use crate::osc::framing::{self, Decoder, Framing, StreamFrame};
 use crate::osc::packet;
 
 /// Eos's OSC TCP port for OSC 1.0 (length-prefixed) packets.
@@ -133,11 +133,11 @@ impl EosConnection<'_> {
             self.decoder.feed(&buf[..n], &mut frames);
             for f in frames {
                 match f {
-                    Frame::Packet(p) => match packet::decode(&p) {
+                    StreamFrame::Packet(p) => match packet::decode(&p) {
                         Ok(ms) => self.queue.extend(ms),
                         Err(e) => tracing::debug!("{}: skipped a packet: {e}", self.source),
                     },
-                    Frame::Oversize { len, .. } => {
+                    StreamFrame::Oversize { len, .. } => {
                         tracing::debug!("{}: skipped a {len}-byte frame", self.source)
                     }
                 }

@@ -23,8 +23,8 @@ use std::time::{Duration, Instant};
 
 use tokio::sync::watch;
 use uuid::Uuid;
+use visobjd_throttle::Throttle;
 
-use crate::Throttle;
 use crate::config::SacnInput;
 use crate::patch::SLOTS;
 

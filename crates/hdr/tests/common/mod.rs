@@ -4,7 +4,7 @@
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
 use rayon::prelude::*;
-use visobjd_hdr::{Exposure, Frame, Pixels};
+use visobjd_hdr::{BracketFrame, Exposure, Pixels};
 
 pub type Rng = rand::rngs::Xoshiro256PlusPlus;
 
@@ -145,7 +145,7 @@ pub fn raw_frames_of<'a>(
     times: &[f64],
     w: usize,
     h: usize,
-) -> Vec<Frame<'a>> {
+) -> Vec<BracketFrame<'a>> {
     frames_of(data, times, w, h, |values| Pixels::Raw {
         values,
         black: BLACK,
@@ -159,7 +159,7 @@ pub fn jpeg_frames_of<'a>(
     times: &[f64],
     w: usize,
     h: usize,
-) -> Vec<Frame<'a>> {
+) -> Vec<BracketFrame<'a>> {
     frames_of(data, times, w, h, Pixels::Jpeg)
 }
 
@@ -170,10 +170,10 @@ fn frames_of<'a, T>(
     w: usize,
     h: usize,
     pixels: impl Fn(&'a [T]) -> Pixels<'a>,
-) -> Vec<Frame<'a>> {
+) -> Vec<BracketFrame<'a>> {
     data.iter()
         .zip(times)
-        .map(|(d, &t)| Frame {
+        .map(|(d, &t)| BracketFrame {
             width: w,
             height: h,
             exposure: exif(t),
