@@ -1,5 +1,5 @@
-//! Export to an ETC Eos console: the live look becomes channel levels and colours on the
-//! console's command line, recorded as a preset, so the programmer keeps the result in the
+//! Export to an ETC Eos console: the live look becomes channel levels and colours on
+//! Eos's command line, recorded as a preset, so the programmer keeps the result in the
 //! show file (paper 5.3).
 //!
 //! Everything goes through Eos's documented OSC command line as a user of its own
@@ -28,13 +28,13 @@ use visobjd_scene::Scene;
 use visobjd_scene::look::Look;
 use visobjd_scene::profile::Slot;
 
-/// How long connecting to and writing to the console may take.
+/// How long connecting to and writing to Eos may take.
 const TIMEOUT: Duration = Duration::from_secs(3);
 
 /// The Eos users an OSC command may run as: Eos devices take user IDs 1..=99.
 const USERS: std::ops::RangeInclusive<u32> = 1..=99;
 
-/// How the console is reached (its OSC settings: UDP, or TCP with either framing).
+/// How Eos is reached (its OSC settings: UDP, or TCP with either framing).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Protocol {
@@ -46,11 +46,11 @@ pub enum Protocol {
     TcpSlip,
 }
 
-/// The `[eos]` config section; no address means no console.
+/// The `[eos]` config section; no address means no export.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct EosConfig {
-    /// The console's OSC address and port, e.g. "10.101.0.5:8000"; "" turns export off.
+    /// Eos's OSC address and port, e.g. "10.101.0.5:8000"; "" turns export off.
     pub address: String,
     /// How to reach it.
     pub protocol: Protocol,
@@ -124,7 +124,7 @@ fn parameter(slot: Slot) -> Option<&'static str> {
     })
 }
 
-/// The command lines that put `look` on the console and record it as preset `n`: per
+/// The command lines that put `look` on Eos and record it as preset `n`: per
 /// light its intensity (`At 100` for a light without a dimmer, whose emitters carry its
 /// intensity) and every colour parameter its profile drives, at the levels the DMX output
 /// sends at master 1.
@@ -162,7 +162,7 @@ pub fn preset_commands(scene: &Scene, look: &Look, n: u32) -> Vec<String> {
 
 /// A level as Eos takes it: percent with at most `decimals` decimals, no trailing zeros.
 /// One decimal is within a tenth of an 8-bit step (0.39%), three within a third of a
-/// 16-bit step (0.0015%), so the console's own rounding lands on the same DMX value.
+/// 16-bit step (0.0015%), so Eos's own rounding lands on the same DMX value.
 fn percent(v: f32, decimals: usize) -> String {
     let p = format!("{:.*}", decimals, f64::from(v.clamp(0.0, 1.0)) * 100.0);
     let p = if p.contains('.') {
@@ -188,7 +188,7 @@ pub fn channel_list(channels: &[u32]) -> String {
         .join(" + ")
 }
 
-/// Sends the command lines to the console as `/eos/user/<n>/newcmd` messages, in order.
+/// Sends the command lines to Eos as `/eos/user/<n>/newcmd` messages, in order.
 pub fn push(config: &EosConfig, to: SocketAddr, commands: &[String]) -> Result<(), String> {
     let addr = config.command_address();
     let packets = commands

@@ -28,6 +28,7 @@ mod transfer;
 
 pub use runner::Runner;
 
+use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use rosc::{OscMessage, OscType};
@@ -38,7 +39,7 @@ use crate::osc::Peer;
 use crate::osc::args::{self, Request};
 use crate::osc::packet::{self, Item, PacketError};
 use visobjd_scene::Scene;
-use visobjd_scene::look::Look;
+use visobjd_scene::look::{Look, LookFile};
 
 /// Every command the daemon understands.
 enum Command {
@@ -201,10 +202,7 @@ impl Context<'_> {
     /// [`Engine::change_looks`], forwarding this command to the backups once written.
     fn change_looks<T>(
         &self,
-        change: impl FnOnce(
-            &Session,
-            &mut std::collections::BTreeMap<u32, visobjd_scene::look::LookFile>,
-        ) -> Result<T, Refusal>,
+        change: impl FnOnce(&Session, &mut BTreeMap<u32, LookFile>) -> Result<T, Refusal>,
     ) -> Result<T, Refusal> {
         self.engine.change_looks(self.forward.as_ref(), change)
     }

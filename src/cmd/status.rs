@@ -1,5 +1,5 @@
-//! `/vo/ping`, `/vo/status`, subscriptions and the console: `/vo/subscribe`,
-//! `/vo/unsubscribe`, `/vo/eos/preset`.
+//! `/vo/ping`, `/vo/status`, subscriptions (`/vo/subscribe`, `/vo/unsubscribe`) and the
+//! export to Eos (`/vo/eos/preset`).
 
 use std::net::SocketAddr;
 
@@ -70,7 +70,7 @@ impl Cmd {
                 Ok(vec![msg("/vo/unsubscribed", Vec::new())])
             }
             Cmd::EosPreset(n) => {
-                // The answer goes to the sender once the console has the commands.
+                // The answer goes to the sender once Eos has the commands.
                 e.eos_preset(n, cx.later())?;
                 Ok(Vec::new())
             }
