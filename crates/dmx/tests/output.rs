@@ -1,6 +1,6 @@
 //! The DMX output on real sockets (127.0.0.1 only; multicast only inside a private network
-//! namespace). Packets are decoded by `common::wire` from the specifications' byte offsets,
-//! independently of the sending code.
+//! namespace). Packets are decoded by `visobjd_testkit::wire` from the specifications' byte
+//! offsets, independently of the sending code.
 
 use std::collections::BTreeMap;
 use std::net::{Ipv4Addr, UdpSocket};
@@ -12,11 +12,8 @@ use visobjd_dmx::Patch;
 use visobjd_dmx::{ArtnetDest, Output, OutputConfig, SacnDest};
 use visobjd_scene::Scene;
 use visobjd_scene::look::{Level, Look};
-
-mod common;
-
-use common::tools;
-use common::wire::{
+use visobjd_testkit::tools;
+use visobjd_testkit::wire::{
     ArtDmx, Sacn, encode_artpoll, encode_node_reply, parse_artnet, parse_discovery,
     parse_pollreply, parse_sacn, parse_sync,
 };

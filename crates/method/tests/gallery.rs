@@ -1,7 +1,5 @@
 //! The compositor against its scalar reference, and the gallery's clustering guarantees.
 
-mod common;
-
 use rand::SeedableRng;
 use rand::rngs::Xoshiro256PlusPlus as Rng;
 use visobjd_compositor::color::encode_srgb8;
@@ -13,8 +11,8 @@ use visobjd_method::stage::{GenerateRequest, Stage};
 use visobjd_scene::look::{Level, Look};
 
 fn stage(name: &str, lights: usize) -> Stage {
-    let dir = common::temp_dir(name);
-    common::stripes(&dir, lights, true);
+    let dir = visobjd_testkit::temp_dir(name);
+    visobjd_testkit::stripes(&dir, lights, true);
     Stage::load(&dir, 0).unwrap()
 }
 

@@ -1,14 +1,13 @@
 //! The sampler's statistical properties (paper 4.2.3) and the designer's constraints,
 //! with fixed seeds and enough samples.
 
-mod common;
-
 use rand::SeedableRng;
 use rand::rngs::Xoshiro256PlusPlus as Rng;
 use rand_distr::{Distribution, Normal};
 use visobjd_method::objective::{Aspects, PaletteColor, Region};
 use visobjd_method::sampler::{Constraints, Keys, Plan, Rig, Spread, Target, gibbs, key_count};
 use visobjd_scene::look::{Level, Look};
+use visobjd_testkit::{TestLight, temp_dir, write_scene};
 
 fn mean(v: &[f32]) -> f32 {
     v.iter().sum::<f32>() / v.len() as f32
@@ -319,7 +318,6 @@ fn the_smaller_region_wins_the_lights_both_select() {
 
 #[test]
 fn region_targeting_selects_exactly_the_expected_lights() {
-    use common::{TestLight, temp_dir, write_scene};
     let dir = temp_dir("region");
     // 40x20 stage; the region is the left quarter (x < 10).
     let lights = vec![
@@ -638,78 +636,6 @@ fn off_lights_are_exactly_zero_and_count_as_zero_in_the_mean() {
     }
     // The other lights make up the mean around the held ones (4 at 0, one at its base).
     assert!((mean(&means) - 0.4).abs() < 0.01, "{}", mean(&means));
-}
-
-#[test]
-fn excluded_and_pinned_lights_keep_the_base_bit_for_bit_on_a_real_stage() {
-    use common::{TestLight, temp_dir, write_scene};
-    use visobjd::engine::rules::{Exclude, Pin, Rules};
-    let dir = temp_dir("sampler-pins");
-    // Eight lights in two groups, each lighting its own 5-pixel column of a 40x20 stage.
-    let lights: Vec<TestLight> = (0..8)
-        .map(|i| {
-            TestLight::rect(
-                i + 1,
-                Some(if i < 4 { "left" } else { "right" }),
-                "rgb",
-                1 + 3 * i as u16,
-                (5 * i as usize, 0, 5 * i as usize + 5, 20),
-                0.8,
-            )
-        })
-        .collect();
-    write_scene(&dir, 40, 20, &["left", "right"], &lights);
-    let stage = visobjd_method::stage::Stage::load(&dir, 40).unwrap();
-    let scene = &stage.scene;
-    let mut rules = Rules::new(scene);
-    // The pin covers columns 0..10 of 40: lights 1 and 2.
-    let region = Region::new(0.0, 0.0, 0.25, 1.0).unwrap();
-    let pinned: Vec<usize> = (0..8)
-        .filter(|&l| stage.footprints.select(region)[l])
-        .collect();
-    assert_eq!(pinned, vec![0, 1]);
-    rules.pins.push(Pin {
-        id: 1,
-        region,
-        lights: pinned,
-    });
-    let right = scene.group_index("right").unwrap();
-    rules.group_exclude[right] = Exclude::Ignore;
-    // A light's own exclusion wins over its group's.
-    rules.light_exclude[7] = Exclude::Off;
-    let mut c = Constraints::none(&stage.rig);
-    rules.apply(scene, &mut c);
-    let base = varied_base(8);
-    let mut t = target(8, 0.5, 0.9, 0.5);
-    t.aspects = Aspects::Both;
-    t.palette = vec![PaletteColor {
-        color: [0.0, 1.0, 0.0],
-        weight: 1.0,
-    }];
-    let plan = Plan::new(&stage.rig, &c, &[t], &base, Spread::default());
-    let mut rng = Rng::seed_from_u64(15);
-    let mut changed = [false; 8];
-    for _ in 0..300 {
-        let look = plan.sample(&base, &mut rng);
-        for l in [0, 1, 4, 5, 6] {
-            assert_eq!(
-                look.levels[l].intensity.to_bits(),
-                base.levels[l].intensity.to_bits()
-            );
-            assert_eq!(
-                look.levels[l].color.map(f32::to_bits),
-                base.levels[l].color.map(f32::to_bits)
-            );
-        }
-        assert_eq!(look.levels[7].intensity, 0.0);
-        for ((c, got), want) in changed.iter_mut().zip(&look.levels).zip(&base.levels) {
-            *c |= got != want;
-        }
-    }
-    assert_eq!(
-        changed,
-        [false, false, true, true, false, false, false, true]
-    );
 }
 
 #[test]

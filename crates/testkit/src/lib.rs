@@ -1,8 +1,8 @@
-//! Builders for small synthetic scenes and reference images that tests write themselves.
-#![allow(dead_code)]
+//! What the workspace's tests share, whichever crate they test: builders for the small
+//! synthetic scenes and images they write themselves, the rule for a missing tool
+//! ([`tools`]) and Art-Net and sACN decoded independently of the sending code ([`wire`]).
+//! A dev-dependency only; it depends on no visobjd crate.
 
-pub mod capture;
-pub mod daemon;
 pub mod tools;
 pub mod wire;
 
@@ -84,7 +84,7 @@ pub fn write_scene(
     dir.to_path_buf()
 }
 
-/// A fresh temporary folder under the target dir, unique per test name.
+/// A fresh temporary folder, unique per test name and process.
 pub fn temp_dir(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("visobjd-test-{}-{name}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
@@ -147,9 +147,9 @@ pub fn write_png(path: &Path, w: u32, h: u32, f: impl Fn(u32, u32) -> [u8; 3]) {
     img.save(path).expect("write PNG");
 }
 
-/// A stage of `n` lights in a row: light i lights a vertical stripe i of a 40x10 image at
-/// level 0.5; each light is its own group unless `groups` assigns them; profiles alternate
-/// `irgb` and `dimmer` when `mixed`, else all `irgb`.
+/// A stage of `n` ungrouped lights in a row: light i lights the 4-pixel stripe i of a
+/// `4n` x 10 image at level 0.5; profiles alternate `irgb` and `dimmer` when `mixed`, else
+/// all `irgb`.
 pub fn stripes(dir: &Path, n: usize, mixed: bool) -> PathBuf {
     let w = 4 * n;
     let lights: Vec<TestLight> = (0..n)
@@ -170,25 +170,4 @@ pub fn stripes(dir: &Path, n: usize, mixed: bool) -> PathBuf {
         })
         .collect();
     write_scene(dir, w, 10, &[], &lights)
-}
-
-/// The size of a long run (kills, seconds, simulated minutes): the environment variable
-/// `knob` when set, else `full` with `VISOBJD_FULL=1`, else `short`. One test serves both:
-/// `cargo test` and CI run the short form, the documented command the full one.
-pub fn size(knob: &str, short: u64, full: u64) -> u64 {
-    if let Ok(v) = std::env::var(knob) {
-        return v
-            .parse()
-            .unwrap_or_else(|_| panic!("{knob}={v:?} is not a whole number"));
-    }
-    if std::env::var("VISOBJD_FULL").is_ok_and(|v| v == "1") {
-        full
-    } else {
-        short
-    }
-}
-
-/// Path of the built `visobjd` binary.
-pub fn bin() -> &'static str {
-    env!("CARGO_BIN_EXE_visobjd")
 }
