@@ -5,17 +5,16 @@
 //! that adds nothing is named and the exit status says so; `visobjd run` loads the result,
 //! generates from it and puts a pick on the wire.
 
-mod common;
-
 use std::net::UdpSocket;
 use std::path::Path;
 use std::process::Command;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use common::capture::{W, basis_errors, config, light_6_is_untouched, listen, lit, stage};
-use common::daemon::{Daemon, Osc, Proto, Setup, int, same_look};
-use common::{bin, temp_dir};
+use crate::common::bin;
+use crate::common::capture::{W, basis_errors, config, light_6_is_untouched, listen, lit, stage};
+use crate::common::daemon::{Daemon, Osc, Proto, Setup, int, same_look};
+use visobjd_testkit::temp_dir;
 
 fn capture(config: &Path, extra: &[&str]) -> std::process::Output {
     Command::new(bin())

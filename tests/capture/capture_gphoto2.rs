@@ -7,8 +7,6 @@
 //! light, and a camera that stops answering mid-capture (a clear timeout error, the
 //! streams terminated, and a run without the fault resuming).
 
-mod common;
-
 use std::ffi::OsString;
 use std::net::UdpSocket;
 use std::path::{Path, PathBuf};
@@ -16,12 +14,13 @@ use std::process::{Command, Output};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use common::capture::{
+use crate::common::bin;
+use crate::common::capture::{
     H, LIGHTS, W, alone_at_full, basis_errors, config, light_6_is_untouched, listen, lit, stage,
     stage_lights, write_npy,
 };
-use common::wire::Sacn;
-use common::{bin, temp_dir, tools};
+use visobjd_testkit::wire::Sacn;
+use visobjd_testkit::{temp_dir, tools};
 
 /// The fake camera rendering the stage `ZOOM` times larger than the basis (capture's box
 /// downsampling to `W` then averages JPEG's blocks and the noise as a real sensor's).

@@ -1,12 +1,11 @@
 //! The offline subcommands through the real binary: results, and one-line errors for bad
 //! input with a non-zero exit and no panic.
 
-mod common;
-
 use std::path::Path;
 use std::process::{Command, Output};
 
-use common::{bin, stripes, temp_dir, write_exr, write_png};
+use crate::common::bin;
+use visobjd_testkit::{stripes, temp_dir, write_exr, write_png};
 
 fn run(args: &[&str]) -> Output {
     Command::new(bin())

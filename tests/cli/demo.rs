@@ -1,10 +1,9 @@
 //! The shipped demo stage: it loads clean, and its references give galleries whose
 //! brightness follows theirs.
 
-mod common;
-
 use std::path::Path;
 
+use crate::common;
 use rand::SeedableRng;
 use visobjd_compositor::color::{lightness, luminance, srgb8_to_linear_table};
 use visobjd_method::objective::{Aspects, Objective, Region, analyze, decode_reference};

@@ -2,7 +2,7 @@
 //! (`fuzz/regressions/<target>/`) through the same checks, under `cargo test`: a crash,
 //! once fixed, stays fixed without nightly or libFuzzer.
 
-#[path = "../fuzz/fuzz_targets/bodies.rs"]
+#[path = "../../fuzz/fuzz_targets/bodies.rs"]
 mod bodies;
 
 use std::path::Path;

@@ -4,13 +4,12 @@
 //! and the rig crate's reading of published MVR and GDTF files agrees with Python's own
 //! zipfile and xml.etree reading of them.
 
-mod common;
-
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use common::{bin, temp_dir, tools, write_exr};
+use crate::common::bin;
+use visobjd_testkit::{temp_dir, tools, write_exr};
 
 const PAR: &str = "BlenderDMX@LED_PAR_64_RGBW@v0.3.gdtf";
 const PROFILE: &str = "BlenderDMX LED PAR 64 RGBW (Default)";

@@ -1,6 +1,6 @@
 //! The real `visobjd run` on loopback: a small scene, its config and state folder, OSC
 //! clients over UDP and both TCP framings, and Art-Net/sACN receivers that decode every
-//! packet independently of the sending code (`common::wire`).
+//! packet independently of the sending code (`visobjd_testkit::wire`).
 //!
 //! Only `rosc` encodes and decodes OSC here; stream framing is written out below.
 
@@ -17,8 +17,10 @@ use std::time::{Duration, Instant};
 
 use rosc::{OscMessage, OscPacket, OscType};
 
-use super::wire::{parse_artnet, parse_sacn};
-use super::{TestLight, bin, temp_dir, write_png, write_scene};
+use visobjd_testkit::wire::{parse_artnet, parse_sacn};
+use visobjd_testkit::{TestLight, temp_dir, write_png, write_scene};
+
+use super::bin;
 
 /// `output.rate_hz` of the test config.
 pub const RATE_HZ: u32 = 20;

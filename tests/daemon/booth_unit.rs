@@ -8,8 +8,6 @@
 //! is stricter than the unit: any call outside the list kills the process (the unit says
 //! EPERM), so a call the unit forgot shows up as a dead daemon, not a warning in a log.
 
-mod common;
-
 use std::collections::{BTreeSet, HashMap};
 use std::io::ErrorKind;
 use std::os::unix::fs::{MetadataExt, PermissionsExt};
@@ -24,10 +22,12 @@ use std::time::Instant;
 use seccompiler::{BpfProgram, SeccompAction, SeccompFilter, TargetArch};
 use syscalls::Sysno;
 
-use common::daemon::{
+use crate::common;
+use crate::common::bin;
+use crate::common::daemon::{
     Daemon, Osc, PATIENCE, PROTOS, Proto, Setup, UNIVERSES, int, same_look, string,
 };
-use common::{bin, temp_dir};
+use visobjd_testkit::temp_dir;
 
 /// The unit under test.
 const UNIT: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/systemd/visobjd.service");

@@ -3,12 +3,10 @@
 //! gives an allowed and a refused sender on one machine. Refused senders get nothing back
 //! (no amplification), change nothing, and are counted in the log at most once per 10 s.
 
-mod common;
-
 use std::io::{ErrorKind, Read, Write};
 use std::net::{IpAddr, Ipv4Addr, Ipv6Addr};
 
-use common::daemon::{
+use crate::common::daemon::{
     Daemon, Framing, LOCALHOST, Osc, PATIENCE, Setup, connect_from, int, msg, string,
 };
 

@@ -2,13 +2,13 @@
 //! arguments, case, button releases, bundles, unknown addresses, non-OSC input, TCP with
 //! both framings, reply types, and `visobjd send`.
 
-mod common;
-
 use std::process::Command;
 
-use common::daemon::{Daemon, Framing, Osc, double, float, int, long, msg, num, string};
-use common::{bin, tools};
+use crate::common;
+use crate::common::bin;
+use crate::common::daemon::{Daemon, Framing, Osc, double, float, int, long, msg, num, string};
 use rosc::{OscBundle, OscPacket, OscTime, OscType};
+use visobjd_testkit::tools;
 
 #[test]
 fn numbers_arrive_in_every_form() {

@@ -8,8 +8,6 @@
 //! selection with the state, so a pick or an undo on the main gives both daemons the same
 //! look on the wire.
 
-mod common;
-
 use std::collections::BTreeMap;
 use std::net::UdpSocket;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -17,12 +15,13 @@ use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use common::daemon::{
+use crate::common;
+use crate::common::daemon::{
     Daemon, Framing, GENERATE_PATIENCE, Light, Osc, PATIENCE, STAGE, Setup, UNIVERSES, int,
     look_mismatch, num, string, text,
 };
-use common::wire::parse_sacn;
 use rosc::OscMessage;
+use visobjd_testkit::wire::parse_sacn;
 
 /// E1.31's network data loss time: a source unheard this long is dropped.
 const HOLD: Duration = Duration::from_millis(2500);

@@ -5,14 +5,13 @@
 //! could not bring back, and log lines that carry journald priorities. Faults are injected
 //! through the daemon's test hooks (`VISOBJD_TEST_HOOKS`).
 
-mod common;
-
 use std::os::unix::net::UnixDatagram;
 use std::os::unix::process::ExitStatusExt;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
-use common::daemon::{Daemon, Osc, PATIENCE, Proto, Setup, int, same_look, string};
+use crate::common;
+use crate::common::daemon::{Daemon, Osc, PATIENCE, Proto, Setup, int, same_look, string};
 
 /// The environment that turns the test hooks on, plus `more`.
 fn env(more: &[(&str, &str)]) -> Vec<(String, String)> {

@@ -1,11 +1,10 @@
 //! The console input (`[input.sacn]`, docs/dmx.md#console-input-sacn) of the real daemon on
 //! loopback, against consoles played by the test: sACN senders written from the E1.31
-//! octets (`common::wire::encode_sacn`), independent of the daemon's code. The daemon's
-//! own sACN output loops back into its input at priority 200, so every test also checks
-//! that its own CID is ignored. What the daemon makes of the console is read on its DMX
-//! output (`common::wire`'s decoder), after `/vo/console/grab` or while following.
-
-mod common;
+//! octets (`visobjd_testkit::wire::encode_sacn`), independent of the daemon's code. The
+//! daemon's own sACN output loops back into its input at priority 200, so every test also
+//! checks that its own CID is ignored. What the daemon makes of the console is read on its
+//! DMX output (`visobjd_testkit::wire`'s decoder), after `/vo/console/grab` or while
+//! following.
 
 use std::collections::BTreeMap;
 use std::net::{SocketAddr, UdpSocket};
@@ -14,12 +13,12 @@ use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use common::daemon::{
+use crate::common::daemon::{
     Daemon, Fixture, LOCALHOST, Osc, PATIENCE, PROTOS, STAGE, UNIVERSES, free_port, int,
     look_mismatch, num, text,
 };
-use common::wire::{STREAM_TERMINATED, encode_sacn};
 use rosc::OscType;
+use visobjd_testkit::wire::{STREAM_TERMINATED, encode_sacn};
 
 /// E1.31's network data loss timeout.
 const SOURCE_LOSS: Duration = Duration::from_millis(2500);

@@ -2,9 +2,8 @@
 //! saturation ranges, exclusions, pins and transfers, checked in every candidate of a
 //! generate, on the wire, across a restart, and refused (changing nothing) when hostile.
 
-mod common;
-
-use common::daemon::{Daemon, Light, Osc, PROTOS, float, int, num, same_look, string};
+use crate::common;
+use crate::common::daemon::{Daemon, Light, Osc, PROTOS, float, int, num, same_look, string};
 use rosc::{OscMessage, OscType};
 
 /// Ratios are held to this in every candidate (docs/method.md).

@@ -3,13 +3,12 @@
 //! their time, frames never stop (idle, during a generate, during a flood), a kill -9
 //! restarts into the same look, and SIGTERM terminates every sACN universe.
 
-mod common;
-
 use std::collections::BTreeMap;
 use std::net::UdpSocket;
 use std::time::{Duration, Instant};
 
-use common::daemon::{
+use crate::common;
+use crate::common::daemon::{
     Daemon, Frame, GAP, Osc, PROTOS, Proto, STAGE, UNIVERSES, float, int, look_mismatch, num,
     same_look, string,
 };

@@ -2,17 +2,16 @@
 //! listener that records the command lines the daemon sends, checked against the DMX the
 //! daemon puts on the wire (decoded by the tests' own decoder), parameter by parameter.
 
-mod common;
-
 use std::collections::BTreeMap;
 use std::io::Read;
 use std::net::{TcpListener, UdpSocket};
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
-use common::daemon::{Daemon, Osc, Proto, Setup, float, int, num};
-use common::{TestLight, temp_dir, write_scene};
+use crate::common;
+use crate::common::daemon::{Daemon, Osc, Proto, Setup, float, int, num};
 use rosc::{OscPacket, OscType};
+use visobjd_testkit::{TestLight, temp_dir, write_scene};
 
 /// Command lines (the string arguments) in `packets`, each of which must be addressed to
 /// Eos user `user`'s command line.

@@ -3,11 +3,9 @@
 //! keeps running through a flood of it, and the selected channels it reports on
 //! `/eos/out/active/chan` become `/vo/console/selection`, which locks lights or keys them.
 
-mod common;
-
 use std::time::Instant;
 
-use common::daemon::{Daemon, Framing, Osc, fixture, float, int, num, same_look, string};
+use crate::common::daemon::{Daemon, Framing, Osc, fixture, float, int, num, same_look, string};
 use rosc::OscType;
 
 /// One of each kind of message Eos sends with OSC TX on, `i` varying the values.

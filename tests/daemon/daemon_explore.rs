@@ -4,9 +4,7 @@
 //! with a normal generate gives the same gallery; a flood of region updates is answered in
 //! full with far fewer galleries; bad input during a drag is refused and changes nothing.
 
-mod common;
-
-use common::daemon::{
+use crate::common::daemon::{
     Daemon, Framing, GENERATE_PATIENCE, Light, Osc, PATIENCE, Udp, float, int, num, string, text,
 };
 use rosc::OscType;

@@ -5,17 +5,16 @@
 //! after load.
 //!
 //! The kill loop runs 50 kills in `cargo test` and CI (about 13 s); the full run is 200:
-//! `VISOBJD_FULL=1 cargo test --release --test daemon_faults kill_9 -- --nocapture`
+//! `VISOBJD_FULL=1 cargo test --release --test daemon daemon_faults::kill_9 -- --nocapture`
 //! (`VISOBJD_KILLS`, `VISOBJD_SEED` set the count and the seed).
-
-mod common;
 
 use std::collections::BTreeMap;
 use std::process::Command;
 use std::time::{Duration, Instant};
 
-use common::daemon::{Daemon, Osc, PROTOS, UNIVERSES, int, num, string};
-use common::tools;
+use crate::common;
+use crate::common::daemon::{Daemon, Osc, PROTOS, UNIVERSES, int, num, string};
+use visobjd_testkit::tools;
 
 /// Look numbers the kill loop saves into.
 const LOOKS: u64 = 5;

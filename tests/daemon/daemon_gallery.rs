@@ -1,9 +1,7 @@
 //! Generate, the gallery, pick/next/prev, undo/redo and the constraints of docs/osc.md against
 //! the real daemon, each with refused cases that change nothing.
 
-mod common;
-
-use common::daemon::{
+use crate::common::daemon::{
     CLUSTERS, COUNT, Daemon, GENERATE_PATIENCE, Light, Osc, Proto, STAGE, Udp, fixture, float, int,
     num, same_look, string, text,
 };

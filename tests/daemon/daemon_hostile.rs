@@ -5,11 +5,10 @@
 //! answering, and DMX goes on with no gap over two frame periods throughout. Cases already
 //! in daemon_args.rs and daemon_objectives.rs are not repeated here.
 
-mod common;
-
 use std::time::{Duration, Instant};
 
-use common::daemon::{
+use crate::common;
+use crate::common::daemon::{
     Daemon, Framing, Osc, PATIENCE, PROTOS, UNIVERSES, double, float, int, long, msg, num, string,
     text,
 };
@@ -229,8 +228,8 @@ fn hostile_references_are_refused_and_a_bomb_does_not_stall_osc() {
     let whole = std::fs::read(refs.join("warm.png")).expect("read");
     std::fs::write(refs.join("cut.png"), &whole[..whole.len() / 2]).expect("write");
     // Enormous dimensions in a tiny file, refused from the header alone.
-    common::png_header_only(&refs.join("wide.png"), 100_000, 100_000);
-    common::png_header_only(&refs.join("tall.png"), 1, 64_000_001);
+    visobjd_testkit::png_header_only(&refs.join("wide.png"), 100_000, 100_000);
+    visobjd_testkit::png_header_only(&refs.join("tall.png"), 1, 64_000_001);
     for image in [
         "up/outside.png",
         "sub/../../outside.png",
@@ -247,7 +246,7 @@ fn hostile_references_are_refused_and_a_bomb_does_not_stall_osc() {
 
     // A real decompression bomb under the 64-megapixel limit: a small file that decodes to
     // 108 MB. It is read off the OSC receive task: a ping sent meanwhile is answered first.
-    common::png_bomb(&refs.join("bomb.png"), 6000, 6000);
+    visobjd_testkit::png_bomb(&refs.join("bomb.png"), 6000, 6000);
     let size = std::fs::metadata(refs.join("bomb.png"))
         .expect("bomb")
         .len();

@@ -1,9 +1,10 @@
 //! The live look, status and feedback addresses of docs/osc.md against the real daemon: each with
 //! a success and a refused case that changes nothing.
 
-mod common;
-
-use common::daemon::{Daemon, Osc, PATIENCE, Proto, STAGE, fixture, float, int, num, string, text};
+use crate::common;
+use crate::common::daemon::{
+    Daemon, Osc, PATIENCE, Proto, STAGE, fixture, float, int, num, string, text,
+};
 
 fn close(a: f64, b: f64) -> bool {
     (a - b).abs() < 1e-4

@@ -1,9 +1,7 @@
 //! Saved looks of docs/osc.md against the real daemon: save, recall, delete and the listing,
 //! refused cases that change nothing, and what survives a kill -9.
 
-mod common;
-
-use common::daemon::{Daemon, Osc, PROTOS, float, int, num, same_look, string};
+use crate::common::daemon::{Daemon, Osc, PROTOS, float, int, num, same_look, string};
 
 #[test]
 fn save_recall_delete_and_list() {

@@ -2,9 +2,7 @@
 //! aspects, region, palette, colour, remove, clear and the listing, each with refused cases
 //! that change nothing, and hostile image paths.
 
-mod common;
-
-use common::daemon::{Daemon, Osc, float, int, num, string, text};
+use crate::common::daemon::{Daemon, Osc, float, int, num, string, text};
 use rosc::OscMessage;
 
 fn near(a: f64, b: f64, tol: f64) -> bool {
@@ -102,7 +100,7 @@ fn hostile_image_paths_are_refused() {
     std::os::unix::fs::symlink("grey.png", refs.join("alias.png")).expect("symlink in");
     std::fs::write(refs.join("notes.png"), "not an image\n").expect("write");
     std::fs::create_dir_all(refs.join("folder.png")).expect("mkdir");
-    common::png_header_only(&refs.join("huge.png"), 9000, 9000);
+    visobjd_testkit::png_header_only(&refs.join("huge.png"), 9000, 9000);
     d.add_objective("grey.png", "both");
     for image in [
         "../outside.png".to_string(),

@@ -3,12 +3,11 @@
 //! listen. The console either has visobjd connect to its port, or opened its own
 //! connection, which then carries them.
 
-mod common;
-
 use std::net::{IpAddr, Ipv4Addr, SocketAddr, TcpListener, TcpStream, UdpSocket};
 use std::time::{Duration, Instant};
 
-use common::daemon::{Daemon, Framing, Osc, PATIENCE, Setup, float, int, msg, string};
+use crate::common;
+use crate::common::daemon::{Daemon, Framing, Osc, PATIENCE, Setup, float, int, msg, string};
 use rosc::{OscMessage, OscPacket, OscType};
 
 const TABLET: IpAddr = IpAddr::V4(Ipv4Addr::new(127, 0, 0, 2));
@@ -195,7 +194,7 @@ fn a_console_that_opened_its_own_connection_gets_everything_on_it() {
 
 #[test]
 fn bad_peers_are_refused_at_start() {
-    let dir = common::temp_dir("peers-bad");
+    let dir = visobjd_testkit::temp_dir("peers-bad");
     let config = dir.join("c.toml");
     for (entries, says) in [
         (

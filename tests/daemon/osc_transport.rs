@@ -2,20 +2,18 @@
 //! speaking UDP, TCP with a length prefix and TCP with SLIP, the `visobjd send` binary, and
 //! python-osc as an independent peer.
 
-mod common;
-
 use std::io::{ErrorKind, Read, Write};
 use std::net::{SocketAddr, TcpListener, TcpStream, UdpSocket};
 use std::process::Command;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use common::tools;
 use rosc::{OscBundle, OscMessage, OscPacket, OscTime, OscType};
 use visobjd::config::OscConfig;
 use visobjd::osc::args::Request;
 use visobjd::osc::framing::{self, Decoder, Frame, Framing};
 use visobjd::osc::{Handler, Limits, Peer, Server, Transport};
+use visobjd_testkit::tools;
 
 const PATIENCE: Duration = Duration::from_secs(5);
 /// How long "nothing arrives" is watched for, after a later probe has already come back.

@@ -3,15 +3,15 @@
 //! every address it listens to is a documented push, and every address of docs/osc.md is
 //! on the tablet unless docs/touchosc.md says it is not.
 
-mod common;
-
 use std::io::Read;
 use std::path::Path;
 use std::process::Command;
 
-use common::daemon::{Daemon, GENERATE_PATIENCE, Osc, Setup, int, string};
-use common::{bin, temp_dir};
+use crate::common;
+use crate::common::bin;
+use crate::common::daemon::{Daemon, GENERATE_PATIENCE, Osc, Setup, int, string};
 use rosc::OscType;
+use visobjd_testkit::temp_dir;
 
 /// One `<osc>` message of the layout.
 #[derive(Debug)]

@@ -7,16 +7,15 @@
 //! of several steps as one command, read back from the daemon and checked on the wire,
 //! the page shown at a laptop's and a tablet's width.
 
-mod common;
-
 use std::io::{Read, Write};
 use std::net::{IpAddr, SocketAddr, TcpStream};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use common::daemon::{Daemon, Osc, PATIENCE, Proto, free_port, int};
-use common::{temp_dir, tools};
+use crate::common;
+use crate::common::daemon::{Daemon, Osc, PATIENCE, Proto, free_port, int};
+use visobjd_testkit::{temp_dir, tools};
 
 /// A daemon with the web gallery on; returns it and the gallery's address.
 fn start(name: &str) -> (Daemon, SocketAddr) {

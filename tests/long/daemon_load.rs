@@ -7,18 +7,16 @@
 //! Two floods, each at its full rate with 50 TCP clients: mixed messages at 20,000/s and
 //! saves and recalls at 2,000/s. `cargo test` and CI run each for 5 s; the full run is 10 s
 //! each (`VISOBJD_LOAD_SECS` sets the length):
-//! `VISOBJD_FULL=1 cargo test --release --test daemon_load -- --nocapture`
+//! `VISOBJD_FULL=1 cargo test --release --test long daemon_load -- --nocapture`
 //! Ping round trips (p50, p99, worst) are printed, not asserted: timings belong in the
 //! figures, not in a pass or fail on a shared machine.
 
-mod common;
-
 use std::io::{ErrorKind, Read, Write};
 use std::net::{SocketAddr, TcpStream, UdpSocket};
-use std::sync::{Mutex, PoisonError};
 use std::time::{Duration, Instant};
 
-use common::daemon::{Daemon, GAP, Osc, PROTOS, UNIVERSES, int, msg, string};
+use crate::common;
+use crate::common::daemon::{Daemon, GAP, Osc, PROTOS, UNIVERSES, int, msg, string};
 
 /// What one load run measured.
 #[derive(Debug)]
@@ -79,13 +77,11 @@ fn flood_packets(flood: Flood) -> Vec<Vec<u8>> {
     v
 }
 
-/// Held by a load run: the runs take turns, so each daemon is measured under its own load.
-static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
-
 /// Runs the load for `secs` seconds at `rate` flood messages a second with `tcp` TCP
 /// clients (a third idle, a third dribbling a byte a second, a third pinging every 100 ms).
 fn load(name: &str, flood: Flood, secs: u64, rate: u64, tcp: usize) -> Report {
-    let _turn = ONE_AT_A_TIME.lock().unwrap_or_else(PoisonError::into_inner);
+    // The runs take turns with each other and the soak: each daemon under its own load.
+    let _alone = crate::alone();
     let mut d = Daemon::start(name);
     for proto in PROTOS {
         for u in UNIVERSES {

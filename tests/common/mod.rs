@@ -1,0 +1,28 @@
+//! What the daemon's black-box tests share beside `visobjd_testkit`: the built binary, the
+//! length of a long run, the running daemon ([`daemon`]) and the capture stage
+//! ([`capture`]). Each test binary compiles it once; not every binary uses all of it.
+#![allow(dead_code)]
+
+pub mod capture;
+pub mod daemon;
+
+/// Path of the built `visobjd` binary.
+pub fn bin() -> &'static str {
+    env!("CARGO_BIN_EXE_visobjd")
+}
+
+/// The size of a long run (kills, seconds, simulated minutes): the environment variable
+/// `knob` when set, else `full` with `VISOBJD_FULL=1`, else `short`. One test serves both:
+/// `cargo test` and CI run the short form, the documented command the full one.
+pub fn size(knob: &str, short: u64, full: u64) -> u64 {
+    if let Ok(v) = std::env::var(knob) {
+        return v
+            .parse()
+            .unwrap_or_else(|_| panic!("{knob}={v:?} is not a whole number"));
+    }
+    if std::env::var("VISOBJD_FULL").is_ok_and(|v| v == "1") {
+        full
+    } else {
+        short
+    }
+}
