@@ -6,7 +6,9 @@
 pub mod tools;
 pub mod wire;
 
+use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
+use std::sync::{Mutex, PoisonError};
 
 /// A light of a synthetic scene: its basis image as a function of pixel position.
 pub struct TestLight {
@@ -84,8 +86,18 @@ pub fn write_scene(
     dir.to_path_buf()
 }
 
-/// A fresh temporary folder, unique per test name and process.
+/// A fresh temporary folder, unique per test name and process. A name is handed out once
+/// per process: two tests of one binary asking for the same one would wipe each other's.
 pub fn temp_dir(name: &str) -> PathBuf {
+    static TAKEN: Mutex<BTreeSet<String>> = Mutex::new(BTreeSet::new());
+    let fresh = TAKEN
+        .lock()
+        .unwrap_or_else(PoisonError::into_inner)
+        .insert(name.to_owned());
+    assert!(
+        fresh,
+        "temp_dir({name:?}) was already handed out in this process"
+    );
     let dir = std::env::temp_dir().join(format!("visobjd-test-{}-{name}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).expect("mkdir temp");
