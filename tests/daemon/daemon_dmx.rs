@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 
 use crate::common;
 use crate::common::daemon::{
-    Daemon, Frame, GAP, Osc, PROTOS, Proto, STAGE, UNIVERSES, float, int, look_mismatch, num,
+    Daemon, DmxPacket, GAP, Osc, PROTOS, Proto, STAGE, UNIVERSES, float, int, look_mismatch, num,
     same_look, string,
 };
 
@@ -138,7 +138,7 @@ fn frames_flow_at_the_rate_in_sequence() {
     d.wire.assert_continuous(from, to, GAP, "while idle");
     for proto in PROTOS {
         for u in UNIVERSES {
-            let frames: Vec<Frame> = d
+            let frames: Vec<DmxPacket> = d
                 .wire
                 .frames(proto, u, from)
                 .into_iter()
