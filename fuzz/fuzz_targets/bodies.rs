@@ -1,6 +1,6 @@
 //! What each fuzz target checks, shared by the libFuzzer targets beside this file and by
-//! `tests/fuzz_corpus.rs`, which replays the committed corpus and every crash found so far
-//! under `cargo test`.
+//! `tests/cli/fuzz_corpus.rs`, which replays the committed corpus and every crash found so
+//! far under `cargo test`.
 
 use visobjd::osc::framing::{Decoder, HEAD, StreamFrame, encode};
 use visobjd_method::objective::{Region, analyze, decode_reference_bytes};

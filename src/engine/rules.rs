@@ -426,3 +426,6 @@ struct PinRecord {
     region: [f32; 4],
     channels: Vec<u32>,
 }
+
+#[cfg(test)]
+mod tests;

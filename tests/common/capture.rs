@@ -1,7 +1,7 @@
-//! What the `visobjd capture` end-to-end tests share (tests/capture.rs with the sim camera,
-//! tests/capture_gphoto2.rs with the fake gphoto2): the test stage and its truth images,
-//! the config, the sACN listener, which lights a DMX universe lights, and the comparison
-//! of captured basis images with the truth.
+//! What the `visobjd capture` end-to-end tests share (tests/capture/capture.rs with the sim
+//! camera, tests/capture/capture_gphoto2.rs with the fake gphoto2): the test stage and its
+//! truth images, the config, the sACN listener, which lights a DMX universe lights, and the
+//! comparison of captured basis images with the truth.
 
 use std::net::UdpSocket;
 use std::path::{Path, PathBuf};
@@ -10,9 +10,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 use visobjd_compositor::basis::read_exr;
-
-use super::wire::{Sacn, parse_sacn};
-use super::{TestLight, write_scene};
+use visobjd_testkit::wire::{Sacn, parse_sacn};
+use visobjd_testkit::{TestLight, write_scene};
 
 /// The stage's size in pixels.
 pub const W: usize = 96;

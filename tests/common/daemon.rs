@@ -1,6 +1,6 @@
 //! The real `visobjd run` on loopback: a small scene, its config and state folder, OSC
 //! clients over UDP and both TCP framings, and Art-Net/sACN receivers that decode every
-//! packet independently of the sending code (`common::wire`).
+//! packet independently of the sending code (`visobjd_testkit::wire`).
 //!
 //! Only `rosc` encodes and decodes OSC here; stream framing is written out below.
 
@@ -17,8 +17,10 @@ use std::time::{Duration, Instant};
 
 use rosc::{OscMessage, OscPacket, OscType};
 
-use super::wire::{parse_artnet, parse_sacn};
-use super::{TestLight, bin, temp_dir, write_png, write_scene};
+use visobjd_testkit::wire::{parse_artnet, parse_sacn};
+use visobjd_testkit::{TestLight, temp_dir, write_png, write_scene};
+
+use super::bin;
 
 /// `output.rate_hz` of the test config.
 pub const RATE_HZ: u32 = 20;
@@ -737,7 +739,7 @@ pub const PROTOS: [Proto; 2] = [Proto::Sacn, Proto::Artnet];
 
 /// One received DMX packet of a scene universe.
 #[derive(Debug, Clone)]
-pub struct Frame {
+pub struct DmxPacket {
     pub at: Instant,
     pub sequence: u8,
     /// sACN Stream_Terminated (always false for Art-Net).
@@ -752,7 +754,7 @@ pub struct Frame {
 #[derive(Default)]
 struct Log {
     /// By (protocol, scene universe), in arrival order.
-    frames: BTreeMap<(Proto, u16), Vec<Frame>>,
+    frames: BTreeMap<(Proto, u16), Vec<DmxPacket>>,
     /// Packets that failed to decode.
     malformed: Vec<String>,
     /// The last time each receiver found its socket empty.
@@ -771,12 +773,12 @@ pub struct Wire {
 /// Art-Net port-address = scene universe + this (config `universe_offset`).
 pub const ARTNET_OFFSET: i32 = -1;
 
-fn decode(proto: Proto, p: &[u8], at: Instant) -> Option<(u16, Frame)> {
+fn decode(proto: Proto, p: &[u8], at: Instant) -> Option<(u16, DmxPacket)> {
     match proto {
         Proto::Sacn => parse_sacn(p).map(|s| {
             (
                 s.universe,
-                Frame {
+                DmxPacket {
                     at,
                     sequence: s.sequence,
                     terminated: s.terminated,
@@ -792,7 +794,7 @@ fn decode(proto: Proto, p: &[u8], at: Instant) -> Option<(u16, Frame)> {
             let universe = (i32::from(a.port_address) - ARTNET_OFFSET) as u16;
             Some((
                 universe,
-                Frame {
+                DmxPacket {
                     at,
                     sequence: a.sequence,
                     terminated: false,
@@ -857,7 +859,7 @@ impl Wire {
     }
 
     /// Every frame of `universe` from `proto` that arrived at or after `since`.
-    pub fn frames(&self, proto: Proto, universe: u16, since: Instant) -> Vec<Frame> {
+    pub fn frames(&self, proto: Proto, universe: u16, since: Instant) -> Vec<DmxPacket> {
         self.check();
         let log = self.log.lock().expect("log");
         log.frames
@@ -867,7 +869,7 @@ impl Wire {
     }
 
     /// The latest frame of `universe` from `proto`.
-    pub fn latest(&self, proto: Proto, universe: u16) -> Option<Frame> {
+    pub fn latest(&self, proto: Proto, universe: u16) -> Option<DmxPacket> {
         self.check();
         let log = self.log.lock().expect("log");
         log.frames

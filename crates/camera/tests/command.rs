@@ -1,15 +1,11 @@
 //! The command template camera: shell-free argv from a template, the exposure from the
 //! written file's EXIF when it has one, else the request (and the frame says so).
 
-/// The project's rule for a missing tool, and the fake gphoto2's readiness check.
-#[allow(dead_code)]
-#[path = "../../../tests/common/tools.rs"]
-mod tools;
-
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};
 
 use visobjd_camera::{CameraOptions, Error, ExposureSource, Shutter, open};
+use visobjd_testkit::tools;
 
 fn folder(name: &str) -> PathBuf {
     let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))

@@ -3,17 +3,13 @@
 //! tool would be. The fake keeps its state in a JSON file and logs each call's argv, so a
 //! test can tell how many processes ran.
 
-/// The project's rule for a missing tool, and the fake gphoto2's readiness check.
-#[allow(dead_code)]
-#[path = "../../../tests/common/tools.rs"]
-mod tools;
-
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Duration;
 
 use visobjd_camera::{Camera, CameraOptions, Error, ExposureSource, Gphoto2, Shutter};
+use visobjd_testkit::tools;
 
 /// The fake camera's folder: a `bin/gphoto2` link to the fake, its state and its log.
 struct Rig {

@@ -798,8 +798,8 @@ impl Session<'_> {
         let mut scene =
             Scene::load(self.scene_dir).map_err(|e| CaptureError::Files(e.to_string()))?;
         // Levels solved with the profiles' emitters, sent and previewed alike: this checks
-        // the images, whatever the measured emitters make of a colour (tests/capture.rs
-        // checks those against the sim's true emitters).
+        // the images, whatever the measured emitters make of a colour
+        // (tests/capture/capture.rs checks those against the sim's true emitters).
         for light in &mut scene.lights {
             light.emitter_measured.clear();
         }

@@ -1,7 +1,7 @@
 //! The parsers on real files written by others (tests/fixtures/rig/README.md says where
 //! each comes from). Every expected value was read from the file by hand, and the comment
-//! says where it is; `tests/import.rs` also checks the MVR and the GDTF against Python's
-//! own zipfile and xml.etree reading.
+//! says where it is; `tests/cli/import.rs` also checks the MVR and the GDTF against
+//! Python's own zipfile and xml.etree reading.
 
 use std::path::PathBuf;
 
