@@ -43,7 +43,7 @@ pub const CLUSTERS: i32 = 6;
 
 /// A light of the test stage as the tests see it.
 #[derive(Debug, Clone, Copy)]
-pub struct Fixture {
+pub struct PatchedLight {
     pub channel: i32,
     pub profile: &'static str,
     pub group: &'static str,
@@ -54,7 +54,7 @@ pub struct Fixture {
 
 /// Six lights, each lighting its own vertical 8-pixel stripe of the 48x20 stage (light 1
 /// the left-most): two dimmers (front), two irgb (side), an rgb and an rgbw (back).
-pub const STAGE: [Fixture; 6] = [
+pub const STAGE: [PatchedLight; 6] = [
     fx(1, "dimmer", "front", 1, 1),
     fx(2, "dimmer", "front", 1, 2),
     fx(3, "irgb", "side", 1, 10),
@@ -69,8 +69,8 @@ const fn fx(
     group: &'static str,
     universe: u16,
     address: usize,
-) -> Fixture {
-    Fixture {
+) -> PatchedLight {
+    PatchedLight {
         channel,
         profile,
         group,
@@ -82,7 +82,7 @@ const fn fx(
 pub const GROUPS: [&str; 3] = ["front", "side", "back"];
 pub const UNIVERSES: [u16; 2] = [1, 2];
 
-impl Fixture {
+impl PatchedLight {
     /// DMX slots the profile takes.
     pub fn footprint(&self) -> usize {
         match self.profile {
@@ -103,7 +103,7 @@ impl Fixture {
     }
 }
 
-pub fn fixture(channel: i32) -> Fixture {
+pub fn fixture(channel: i32) -> PatchedLight {
     *STAGE
         .iter()
         .find(|f| f.channel == channel)
@@ -220,7 +220,7 @@ pub fn text(a: &OscType) -> String {
 
 /// One light of a `/vo/live` or `/vo/candidate` reply.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Light {
+pub struct LightLevel {
     pub ch: i32,
     pub intensity: f32,
     /// sRGB 0..1.
@@ -228,10 +228,10 @@ pub struct Light {
 }
 
 /// `ch intensity r g b` groups, in order.
-pub fn lights(args: &[OscType]) -> Vec<Light> {
+pub fn lights(args: &[OscType]) -> Vec<LightLevel> {
     assert_eq!(args.len() % 5, 0, "ch intensity r g b per light: {args:?}");
     args.chunks(5)
-        .map(|c| Light {
+        .map(|c| LightLevel {
             ch: num(&c[0]) as i32,
             intensity: num(&c[1]) as f32,
             color: [num(&c[2]) as f32, num(&c[3]) as f32, num(&c[4]) as f32],
@@ -240,7 +240,7 @@ pub fn lights(args: &[OscType]) -> Vec<Light> {
 }
 
 /// Whether two looks agree within `tol` on every value.
-pub fn same_look(a: &[Light], b: &[Light], tol: f32) -> bool {
+pub fn same_look(a: &[LightLevel], b: &[LightLevel], tol: f32) -> bool {
     a.len() == b.len()
         && a.iter().zip(b).all(|(x, y)| {
             x.ch == y.ch
@@ -321,9 +321,9 @@ impl Status {
 
 /// What a command that fails must leave as it was.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Snapshot {
+pub struct Untouched {
     pub status: Status,
-    pub live: Vec<Light>,
+    pub live: Vec<LightLevel>,
     pub objectives: Vec<OscMessage>,
     pub looks: Vec<(i32, String)>,
 }
@@ -471,13 +471,13 @@ pub trait Osc {
         Status::parse(&self.ok("/vo/status", vec![], "/vo/status"))
     }
 
-    fn live(&mut self) -> Vec<Light> {
+    fn live(&mut self) -> Vec<LightLevel> {
         let m = self.ok("/vo/live", vec![], "/vo/live");
         lights(&m.args)
     }
 
     /// Gallery entry `k`, member `m`.
-    fn candidate(&mut self, k: i32, m: i32) -> Vec<Light> {
+    fn candidate(&mut self, k: i32, m: i32) -> Vec<LightLevel> {
         let r = self.ok("/vo/candidate", vec![int(k), int(m)], "/vo/candidate");
         assert!(r.args.len() >= 2, "{r:?}");
         assert_eq!(
@@ -520,8 +520,8 @@ pub trait Osc {
             .collect()
     }
 
-    fn snapshot(&mut self) -> Snapshot {
-        Snapshot {
+    fn snapshot(&mut self) -> Untouched {
+        Untouched {
             status: self.status(),
             live: self.live(),
             objectives: self.objectives(),
@@ -603,7 +603,7 @@ impl Osc for Udp {
 
 /// TCP framing, written out here.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Framing {
+pub enum TcpFraming {
     /// OSC 1.0: a big-endian u32 length before each packet.
     LengthPrefix,
     /// OSC 1.1: RFC 1055 SLIP (END 0xC0, ESC 0xDB, ESC_END 0xDC, ESC_ESC 0xDD).
@@ -613,7 +613,7 @@ pub enum Framing {
 /// An OSC client over one TCP connection.
 pub struct Tcp {
     stream: TcpStream,
-    framing: Framing,
+    framing: TcpFraming,
     buf: Vec<u8>,
     queue: VecDeque<OscMessage>,
     log: PathBuf,
@@ -622,12 +622,12 @@ pub struct Tcp {
 impl Tcp {
     fn frame(&self, packet: &[u8]) -> Vec<u8> {
         match self.framing {
-            Framing::LengthPrefix => {
+            TcpFraming::LengthPrefix => {
                 let mut v = (packet.len() as u32).to_be_bytes().to_vec();
                 v.extend_from_slice(packet);
                 v
             }
-            Framing::Slip => {
+            TcpFraming::Slip => {
                 let mut v = vec![0xC0];
                 for &b in packet {
                     match b {
@@ -646,7 +646,7 @@ impl Tcp {
     fn unframe(&mut self) -> Vec<Vec<u8>> {
         let mut frames = Vec::new();
         match self.framing {
-            Framing::LengthPrefix => {
+            TcpFraming::LengthPrefix => {
                 while self.buf.len() >= 4 {
                     let len = u32::from_be_bytes(self.buf[..4].try_into().expect("4")) as usize;
                     if self.buf.len() < 4 + len {
@@ -656,7 +656,7 @@ impl Tcp {
                     self.buf.drain(..4 + len);
                 }
             }
-            Framing::Slip => {
+            TcpFraming::Slip => {
                 while let Some(end) = self.buf.iter().position(|&b| b == 0xC0) {
                     let raw: Vec<u8> = self.buf.drain(..=end).collect();
                     let mut frame = Vec::new();
@@ -912,7 +912,7 @@ impl Wire {
 
     /// Waits until the latest frames of both universes from `proto` show `look` (within a
     /// DMX step); returns nothing or panics with the last mismatch.
-    pub fn wait_look(&self, proto: Proto, look: &[Light]) {
+    pub fn wait_look(&self, proto: Proto, look: &[LightLevel]) {
         let end = Instant::now() + PATIENCE;
         loop {
             let mismatch = match self.latest_universes(proto) {
@@ -1028,7 +1028,7 @@ pub struct Decoded {
     pub emitters: [f32; 3],
 }
 
-pub fn decode_light(f: &Fixture, dmx_of_universe: &[u8]) -> Decoded {
+pub fn decode_light(f: &PatchedLight, dmx_of_universe: &[u8]) -> Decoded {
     let s: Vec<f32> = f
         .slots(dmx_of_universe)
         .iter()
@@ -1060,7 +1060,7 @@ pub const STEP: f32 = 1.0 / 255.0 + 1e-4;
 
 /// Where the slots disagree with `look` (decoded through each light's profile, within one
 /// DMX step per slot involved), or `None`.
-pub fn look_mismatch(look: &[Light], dmx: &BTreeMap<u16, Vec<u8>>) -> Option<String> {
+pub fn look_mismatch(look: &[LightLevel], dmx: &BTreeMap<u16, Vec<u8>>) -> Option<String> {
     assert_eq!(look.len(), STAGE.len(), "a look of every light: {look:?}");
     for l in look {
         let f = fixture(l.ch);
@@ -1312,7 +1312,7 @@ impl Daemon {
     }
 
     /// A new TCP connection in `framing`.
-    pub fn tcp(&self, framing: Framing) -> Tcp {
+    pub fn tcp(&self, framing: TcpFraming) -> Tcp {
         self.tcp_from(self.setup.client, framing)
     }
 
@@ -1323,7 +1323,7 @@ impl Daemon {
 
     /// A TCP connection the daemon opened (to a `[[osc.peer]]`), accepted by the test, read
     /// and written in `framing`.
-    pub fn tcp_accepted(&self, stream: TcpStream, framing: Framing) -> Tcp {
+    pub fn tcp_accepted(&self, stream: TcpStream, framing: TcpFraming) -> Tcp {
         Tcp {
             stream,
             framing,
@@ -1334,7 +1334,7 @@ impl Daemon {
     }
 
     /// A new TCP connection from `ip` (any loopback address) in `framing`.
-    pub fn tcp_from(&self, ip: IpAddr, framing: Framing) -> Tcp {
+    pub fn tcp_from(&self, ip: IpAddr, framing: TcpFraming) -> Tcp {
         let stream = connect_from(ip, self.tcp_addr()).expect("TCP connect");
         stream.set_nodelay(true).expect("nodelay");
         self.tcp_accepted(stream, framing)

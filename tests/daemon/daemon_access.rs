@@ -7,7 +7,7 @@ use std::io::{ErrorKind, Read, Write};
 use std::net::{IpAddr, Ipv4Addr, Ipv6Addr};
 
 use crate::common::daemon::{
-    Daemon, Framing, LOCALHOST, Osc, PATIENCE, Setup, connect_from, int, msg, string,
+    Daemon, LOCALHOST, Osc, PATIENCE, Setup, TcpFraming, connect_from, int, msg, string,
 };
 
 const SECOND: IpAddr = IpAddr::V4(Ipv4Addr::new(127, 0, 0, 2));
@@ -57,7 +57,7 @@ fn senders_outside_the_allow_list_get_nothing_and_change_nothing() {
     // Allowed: UDP and TCP from 127.0.0.2.
     let r = d.ok("/vo/ping", vec![string("in")], "/vo/pong");
     assert_eq!(r.args, [string("in")]);
-    let mut t = d.tcp_from(SECOND, Framing::Slip);
+    let mut t = d.tcp_from(SECOND, TcpFraming::Slip);
     t.ok("/vo/ping", vec![int(2)], "/vo/pong");
 
     // Refused: 127.0.0.1, with everything that would be answered, large answers included,
@@ -104,7 +104,7 @@ fn ipv6_addresses_and_blocks_are_checked_too() {
         ..Setup::default()
     };
     let d = Daemon::start_setup("access-v6-in", setup(&["127.0.0.2", "::1/128"]));
-    let mut t = d.tcp_from(V6, Framing::LengthPrefix);
+    let mut t = d.tcp_from(V6, TcpFraming::LengthPrefix);
     let r = t.ok("/vo/ping", vec![string("v6")], "/vo/pong");
     assert_eq!(r.args, [string("v6")]);
     drop(d);

@@ -6,7 +6,7 @@ use std::process::Command;
 
 use crate::common;
 use crate::common::bin;
-use crate::common::daemon::{Daemon, Framing, Osc, double, float, int, long, msg, num, string};
+use crate::common::daemon::{Daemon, Osc, TcpFraming, double, float, int, long, msg, num, string};
 use rosc::{OscBundle, OscPacket, OscTime, OscType};
 use visobjd_testkit::tools;
 
@@ -150,7 +150,7 @@ fn unknown_addresses_are_errors_and_garbage_gets_nothing() {
     assert!(got.is_empty(), "non-OSC input was answered: {got:?}");
 }
 
-fn over_tcp(framing: Framing) {
+fn over_tcp(framing: TcpFraming) {
     let mut d = Daemon::start(&format!("args-tcp-{framing:?}"));
     let mut c = d.tcp(framing);
     let r = c.ok("/vo/ping", vec![int(1), string("a\u{c0}b")], "/vo/pong");
@@ -161,8 +161,8 @@ fn over_tcp(framing: Framing) {
     c.silent("/vo/next", vec![int(0)]);
     // A frame that is not OSC gets nothing.
     let garbage = match framing {
-        Framing::LengthPrefix => [&[0, 0, 0, 8][..], b"not osc!"].concat(),
-        Framing::Slip => [&[0xC0][..], b"not osc!", &[0xC0]].concat(),
+        TcpFraming::LengthPrefix => [&[0, 0, 0, 8][..], b"not osc!"].concat(),
+        TcpFraming::Slip => [&[0xC0][..], b"not osc!", &[0xC0]].concat(),
     };
     c.send_raw(&garbage);
     let got = c.fence();
@@ -192,12 +192,12 @@ fn over_tcp(framing: Framing) {
 
 #[test]
 fn tcp_length_prefixed() {
-    over_tcp(Framing::LengthPrefix);
+    over_tcp(TcpFraming::LengthPrefix);
 }
 
 #[test]
 fn tcp_slip() {
-    over_tcp(Framing::Slip);
+    over_tcp(TcpFraming::Slip);
 }
 
 /// The type tags docs/osc.md gives (`:i` int32, `:f` float32, `:s` string).

@@ -17,7 +17,7 @@ use std::time::{Duration, Instant};
 
 use crate::common;
 use crate::common::daemon::{
-    Daemon, Framing, GENERATE_PATIENCE, Light, Osc, PATIENCE, STAGE, Setup, UNIVERSES, int,
+    Daemon, GENERATE_PATIENCE, LightLevel, Osc, PATIENCE, STAGE, Setup, TcpFraming, UNIVERSES, int,
     look_mismatch, num, string, text,
 };
 use rosc::OscMessage;
@@ -265,11 +265,11 @@ fn wait_following(backup: &Daemon, times: usize) {
 /// What a backup must hold as its main does, read over OSC.
 #[derive(Debug, PartialEq)]
 struct Mirror {
-    live: Vec<Light>,
+    live: Vec<LightLevel>,
     objectives: Vec<rosc::OscMessage>,
     looks: Vec<(i32, String)>,
     entry: i32,
-    gallery: Vec<Vec<Light>>,
+    gallery: Vec<Vec<LightLevel>>,
 }
 
 fn mirror_of(d: &mut Daemon) -> Mirror {
@@ -486,7 +486,7 @@ fn a_pick_just_before_the_kill_is_what_the_backup_shows() {
 
 /// Waits until the main's stream (at its priority) and the backup's (at its own) both
 /// decode, slot for slot, to `look`; returns the slots.
-fn both_streams_show(merger: &Merger, look: &[Light], what: &str) -> BTreeMap<u16, Vec<u8>> {
+fn both_streams_show(merger: &Merger, look: &[LightLevel], what: &str) -> BTreeMap<u16, Vec<u8>> {
     let mut shown = BTreeMap::new();
     eventually(&format!("both streams showing {what}"), || {
         match (merger.sent_at(MAIN), merger.sent_at(BACKUP)) {
@@ -609,7 +609,7 @@ fn the_console_selection_reaches_a_late_backup_and_its_changes_keep_their_order(
     // The console changes its selection while a tablet locks and keys it, concurrently:
     // the backup applies the selections, locks and keys in the main's order, so it ends
     // with the main's constraints.
-    let mut tablet = main.tcp(Framing::LengthPrefix);
+    let mut tablet = main.tcp(TcpFraming::LengthPrefix);
     let eos = std::thread::spawn(move || {
         for i in 0..300 {
             select(

@@ -14,7 +14,7 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use crate::common::daemon::{
-    Daemon, Fixture, LOCALHOST, Osc, PATIENCE, PROTOS, STAGE, UNIVERSES, free_port, int,
+    Daemon, LOCALHOST, Osc, PATIENCE, PROTOS, PatchedLight, STAGE, UNIVERSES, free_port, int,
     look_mismatch, num, text,
 };
 use rosc::OscType;
@@ -269,7 +269,7 @@ fn status_line(d: &mut Daemon) -> String {
 /// Where the daemon's output differs from `want` by more than a DMX step on a patched
 /// fixture's slots (`want`: the console's slots per universe), or `None`.
 fn mismatch(out: &BTreeMap<u16, Vec<u8>>, want: &BTreeMap<u16, Vec<u8>>) -> Option<String> {
-    STAGE.iter().find_map(|f: &Fixture| {
+    STAGE.iter().find_map(|f: &PatchedLight| {
         let (o, w) = (f.slots(&out[&f.universe]), f.slots(&want[&f.universe]));
         let off = o.iter().zip(w).any(|(a, b)| a.abs_diff(*b) > 1);
         off.then(|| {

@@ -3,7 +3,7 @@
 //! generate, on the wire, across a restart, and refused (changing nothing) when hostile.
 
 use crate::common;
-use crate::common::daemon::{Daemon, Light, Osc, PROTOS, float, int, num, same_look, string};
+use crate::common::daemon::{Daemon, LightLevel, Osc, PROTOS, float, int, num, same_look, string};
 use rosc::{OscMessage, OscType};
 
 /// Ratios are held to this in every candidate (docs/method.md).
@@ -19,7 +19,7 @@ fn constraints(d: &mut Daemon) -> Vec<OscMessage> {
 }
 
 /// Every candidate of the gallery, as (entry, member, look).
-fn candidates(d: &mut Daemon) -> Vec<(i32, i32, Vec<Light>)> {
+fn candidates(d: &mut Daemon) -> Vec<(i32, i32, Vec<LightLevel>)> {
     let sizes = d.gallery();
     assert!(!sizes.is_empty(), "a gallery");
     let mut out = Vec::new();
@@ -32,14 +32,14 @@ fn candidates(d: &mut Daemon) -> Vec<(i32, i32, Vec<Light>)> {
     out
 }
 
-fn by_ch(look: &[Light], ch: i32) -> Light {
+fn by_ch(look: &[LightLevel], ch: i32) -> LightLevel {
     look.iter()
         .find(|l| l.ch == ch)
         .expect("a stage light")
         .clone()
 }
 
-fn mean(look: &[Light], chs: &[i32]) -> f32 {
+fn mean(look: &[LightLevel], chs: &[i32]) -> f32 {
     chs.iter().map(|&c| by_ch(look, c).intensity).sum::<f32>() / chs.len() as f32
 }
 
@@ -51,7 +51,7 @@ fn hsv_saturation(c: [f32; 3]) -> f32 {
 }
 
 /// A base look with distinct levels and colours, set by faders.
-fn set_base(d: &mut Daemon) -> Vec<Light> {
+fn set_base(d: &mut Daemon) -> Vec<LightLevel> {
     d.ok("/vo/fade", vec![float(0.0)], "/vo/fade");
     for (ch, v) in [(1, 0.3), (2, 0.7), (3, 0.45), (4, 0.55), (5, 0.2), (6, 0.9)] {
         d.ok(

@@ -5,7 +5,7 @@
 
 use std::time::Instant;
 
-use crate::common::daemon::{Daemon, Framing, Osc, fixture, float, int, num, same_look, string};
+use crate::common::daemon::{Daemon, Osc, TcpFraming, fixture, float, int, num, same_look, string};
 use rosc::OscType;
 
 /// One of each kind of message Eos sends with OSC TX on, `i` varying the values.
@@ -85,8 +85,8 @@ fn a_flood_of_eos_output_gets_no_answer_and_the_dmx_keeps_running() {
     let before = Instant::now();
     // Eos's OSC UDP TX, then a TCP connection in each framing (Eos's TCP modes).
     flood(&mut d.client());
-    flood(&mut d.tcp(Framing::LengthPrefix));
-    flood(&mut d.tcp(Framing::Slip));
+    flood(&mut d.tcp(TcpFraming::LengthPrefix));
+    flood(&mut d.tcp(TcpFraming::Slip));
     d.wire.assert_continuous_since(before, "through the flood");
     // Still serving: the live look is what it was.
     let live = d.live();

@@ -5,7 +5,8 @@
 //! full with far fewer galleries; bad input during a drag is refused and changes nothing.
 
 use crate::common::daemon::{
-    Daemon, Framing, GENERATE_PATIENCE, Light, Osc, PATIENCE, Udp, float, int, num, string, text,
+    Daemon, GENERATE_PATIENCE, LightLevel, Osc, PATIENCE, TcpFraming, Udp, float, int, num, string,
+    text,
 };
 use rosc::OscType;
 
@@ -30,7 +31,7 @@ fn subscriber(d: &Daemon) -> Udp {
 }
 
 /// Every candidate of the gallery, entry by entry.
-fn gallery(d: &mut Daemon) -> Vec<Vec<Light>> {
+fn gallery(d: &mut Daemon) -> Vec<Vec<LightLevel>> {
     let sizes = d.gallery();
     let mut all = Vec::new();
     for (k, &n) in sizes.iter().enumerate() {
@@ -167,7 +168,7 @@ fn a_flood_of_region_updates_is_answered_with_far_fewer_galleries() {
     let mut listen = subscriber(&d);
     // Over TCP: a burst of 1000 datagrams and their 1000 replies would overflow the
     // sockets' buffers (UDP drops, by design), and every update must arrive to be counted.
-    let mut hand = d.tcp(Framing::LengthPrefix);
+    let mut hand = d.tcp(TcpFraming::LengthPrefix);
     let seed = start(&mut hand);
     const UPDATES: usize = 1000;
     let path = format!("/vo/objective/{id}/region");

@@ -2,8 +2,8 @@
 //! the real daemon, each with refused cases that change nothing.
 
 use crate::common::daemon::{
-    CLUSTERS, COUNT, Daemon, GENERATE_PATIENCE, Light, Osc, Proto, STAGE, Udp, fixture, float, int,
-    num, same_look, string, text,
+    CLUSTERS, COUNT, Daemon, GENERATE_PATIENCE, LightLevel, Osc, Proto, STAGE, Udp, fixture, float,
+    int, num, same_look, string, text,
 };
 
 /// A daemon with one objective and a generated gallery; returns it with the entry sizes.
@@ -15,7 +15,7 @@ fn generated(name: &str) -> (Daemon, Vec<i32>) {
     (d, sizes)
 }
 
-fn check_look(look: &[Light]) {
+fn check_look(look: &[LightLevel]) {
     assert_eq!(
         look.iter().map(|l| l.ch).collect::<Vec<_>>(),
         STAGE.iter().map(|f| f.channel).collect::<Vec<_>>()

@@ -9,8 +9,8 @@ use std::time::{Duration, Instant};
 
 use crate::common;
 use crate::common::daemon::{
-    Daemon, Framing, Osc, PATIENCE, PROTOS, UNIVERSES, double, float, int, long, msg, num, string,
-    text,
+    Daemon, Osc, PATIENCE, PROTOS, TcpFraming, UNIVERSES, double, float, int, long, msg, num,
+    string, text,
 };
 use rosc::{OscArray, OscBundle, OscPacket, OscTime, OscType};
 
@@ -122,7 +122,7 @@ fn broken_oversized_and_deep_packets_are_answered_and_change_nothing() {
     // TCP: a 10 MB string argument is over the frame limit in either framing. It is
     // skipped without being buffered, named in the error, and the connection goes on.
     let ten_mb = "x".repeat(10 * 1024 * 1024);
-    for framing in [Framing::LengthPrefix, Framing::Slip] {
+    for framing in [TcpFraming::LengthPrefix, TcpFraming::Slip] {
         let before = d.snapshot();
         let rss = d.rss_kib();
         let mut t = d.tcp(framing);

@@ -7,7 +7,7 @@ use std::net::{IpAddr, Ipv4Addr, SocketAddr, TcpListener, TcpStream, UdpSocket};
 use std::time::{Duration, Instant};
 
 use crate::common;
-use crate::common::daemon::{Daemon, Framing, Osc, PATIENCE, Setup, float, int, msg, string};
+use crate::common::daemon::{Daemon, Osc, PATIENCE, Setup, TcpFraming, float, int, msg, string};
 use rosc::{OscMessage, OscPacket, OscType};
 
 const TABLET: IpAddr = IpAddr::V4(Ipv4Addr::new(127, 0, 0, 2));
@@ -106,7 +106,10 @@ fn peers(tablet_port: u16, console_port: u16, framing: &str) -> String {
 
 #[test]
 fn a_tablet_and_a_tcp_console_each_get_replies_and_pushes_where_they_listen() {
-    for (framing, theirs) in [("tcp", Framing::LengthPrefix), ("slip", Framing::Slip)] {
+    for (framing, theirs) in [
+        ("tcp", TcpFraming::LengthPrefix),
+        ("slip", TcpFraming::Slip),
+    ] {
         let console_listen = TcpListener::bind((CONSOLE, 0)).unwrap();
         let console_port = console_listen.local_addr().unwrap().port();
         // The tablet's listening port must be known before the daemon starts.
@@ -177,7 +180,7 @@ fn a_console_that_opened_its_own_connection_gets_everything_on_it() {
         daemon: SocketAddr::new(d.setup.udp, d.port),
         ..probe
     };
-    let mut console = d.tcp_from(CONSOLE, Framing::Slip);
+    let mut console = d.tcp_from(CONSOLE, TcpFraming::Slip);
     console.send("/vo/subscribe", vec![]);
     let got = tcp_until(&mut console, "/vo/subscribed", &[int(9)]);
     assert!(got.iter().any(|m| m.addr == "/vo/status"), "{got:?}");

@@ -769,14 +769,14 @@ fn the_password_is_asked_for() {
 
 /// The look the page shows (its last state: every light's intensity and colour), as the
 /// wire decoder compares it; a light without colour reads `1 1 1` as on OSC.
-fn page_look(page: &mut Page) -> Vec<common::daemon::Light> {
+fn page_look(page: &mut Page) -> Vec<common::daemon::LightLevel> {
     let v = page.eval(
         "JSON.stringify(st ? st.lights.map(l => [l.ch, l.intensity, l.colour ? l.color : [1, 1, 1]]) : [])",
     );
     let rows: Vec<(i32, f32, [f32; 3])> =
         serde_json::from_str(v.as_str().expect("text")).expect("lights");
     rows.into_iter()
-        .map(|(ch, intensity, color)| common::daemon::Light {
+        .map(|(ch, intensity, color)| common::daemon::LightLevel {
             ch,
             intensity,
             color,
@@ -786,7 +786,12 @@ fn page_look(page: &mut Page) -> Vec<common::daemon::Light> {
 
 /// Waits until the page shows `want` (within float noise), then checks both protocols on
 /// the wire carry what the page shows.
-fn shows_on_page_and_wire(page: &mut Page, d: &Daemon, want: &[common::daemon::Light], step: &str) {
+fn shows_on_page_and_wire(
+    page: &mut Page,
+    d: &Daemon,
+    want: &[common::daemon::LightLevel],
+    step: &str,
+) {
     let end = Instant::now() + Duration::from_secs(30);
     loop {
         let shown = page_look(page);
@@ -999,7 +1004,7 @@ fn a_designer_session_in_the_browser() {
     let before = d.live();
     let third = d.candidate(3, 1);
     page.click("#gallery .entry[data-k='3'] .transfer");
-    let transferred: Vec<common::daemon::Light> = before
+    let transferred: Vec<common::daemon::LightLevel> = before
         .iter()
         .zip(&third)
         .map(|(b, c)| {
@@ -1359,7 +1364,7 @@ fn constraints_pins_a_transfer_region_and_history_from_the_browser() {
     let third = d.candidate(3, 1);
     sent(&mut page);
     page.click("#gallery .entry[data-k='3'] .takeregion");
-    let taken: Vec<common::daemon::Light> = before
+    let taken: Vec<common::daemon::LightLevel> = before
         .iter()
         .zip(&third)
         .map(|(b, c)| {
