@@ -11,8 +11,10 @@ use visobjd_dmx::{InputConfig, OutputConfig};
 use visobjd_scene::describe_toml_error;
 
 mod backup;
+mod peers;
 
 pub use backup::BackupConfig;
+pub use peers::{PeerConfig, PeerFraming, validate_peers};
 
 /// The whole configuration, paths resolved.
 #[derive(Debug, Clone)]
@@ -90,7 +92,7 @@ pub struct OscConfig {
     /// Senders allowed (addresses or CIDR blocks); empty: loopback only.
     pub allow: Vec<String>,
     /// `[[osc.peer]]`: where known clients get their replies and pushes.
-    pub peer: Vec<crate::osc::peers::PeerConfig>,
+    pub peer: Vec<PeerConfig>,
 }
 
 impl Default for OscConfig {
@@ -268,7 +270,7 @@ impl Config {
             .iter()
             .map(|a| Cidr::parse(a).map_err(|e| at(format!("osc.allow: {e}"))))
             .collect::<Result<Vec<_>, _>>()?;
-        crate::osc::peers::validate(&file.osc.peer, &allow).map_err(at)?;
+        validate_peers(&file.osc.peer, &allow).map_err(at)?;
         let g = &file.generate;
         let checks = [
             (

@@ -13,84 +13,8 @@
 use std::net::{IpAddr, SocketAddr};
 use std::sync::{Arc, Mutex};
 
-use serde::Deserialize;
-
 use super::framing::Framing;
-use crate::config::Cidr;
-
-/// How a peer wants its replies.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum PeerFraming {
-    /// Datagrams to `address:reply_port`.
-    Udp,
-    /// TCP, OSC 1.0 (32-bit big-endian length prefix).
-    Tcp,
-    /// TCP, OSC 1.1 (SLIP).
-    Slip,
-}
-
-/// One `[[osc.peer]]` entry.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct PeerConfig {
-    /// A name for the log and errors ("tablet", "eos").
-    pub name: String,
-    /// The peer's IP address (no port: any source port of it matches).
-    pub address: String,
-    /// Where it listens: the UDP port, or the TCP port visobjd connects to.
-    pub reply_port: u16,
-    /// How it wants replies.
-    pub framing: PeerFraming,
-}
-
-impl PeerConfig {
-    fn ip(&self) -> Option<IpAddr> {
-        self.address
-            .trim()
-            .parse::<IpAddr>()
-            .ok()
-            .map(|a| a.to_canonical())
-    }
-}
-
-/// Checks the entries: names present and unique, addresses IPs, unique, and heard (on
-/// `allow`, or loopback when it is empty), reply ports not 0. Err is one sentence naming
-/// the entry and the key.
-pub fn validate(peers: &[PeerConfig], allow: &[Cidr]) -> Result<(), String> {
-    for (i, p) in peers.iter().enumerate() {
-        let at = format!("osc.peer[{i}] (`{}`)", p.name);
-        if p.name.trim().is_empty() {
-            return Err(format!(
-                "osc.peer[{i}]: name is empty; give every peer a name"
-            ));
-        }
-        let ip = p.ip().ok_or_else(|| {
-            format!(
-                "{at}: address `{}` is not an IP address such as 10.101.0.20 (no port: reply_port says where it listens)",
-                p.address
-            )
-        })?;
-        if p.reply_port == 0 {
-            return Err(format!("{at}: reply_port must be 1..=65535"));
-        }
-        if !crate::config::permits(allow, ip) {
-            return Err(format!(
-                "{at}: {ip} is not on osc.allow, so visobjd would never hear it"
-            ));
-        }
-        if let Some(q) = peers[..i].iter().find(|q| q.name.trim() == p.name.trim()) {
-            return Err(format!("{at}: the name `{}` is used twice", q.name));
-        }
-        if let Some(q) = peers[..i].iter().find(|q| q.ip() == Some(ip)) {
-            return Err(format!(
-                "{at}: address {ip} is also peer `{}`; one entry per address",
-                q.name
-            ));
-        }
-    }
-    Ok(())
-}
+use crate::config::{PeerConfig, PeerFraming};
 
 /// A configured peer at run time.
 #[derive(Debug)]
@@ -162,36 +86,6 @@ mod tests {
             reply_port: 9000,
             framing,
         }
-    }
-
-    #[test]
-    fn entries_are_checked() {
-        let ok = [
-            peer("tablet", "127.0.0.2", PeerFraming::Udp),
-            peer("eos", "127.0.0.3", PeerFraming::Tcp),
-        ];
-        assert_eq!(validate(&ok, &[]), Ok(()));
-        let dup = [
-            ok[0].clone(),
-            peer("tablet", "127.0.0.4", PeerFraming::Slip),
-        ];
-        assert!(validate(&dup, &[]).unwrap_err().contains("used twice"));
-        let same = [ok[0].clone(), peer("eos", "127.0.0.2", PeerFraming::Udp)];
-        assert!(
-            validate(&same, &[])
-                .unwrap_err()
-                .contains("also peer `tablet`")
-        );
-        let port = [peer("eos", "127.0.0.1:3032", PeerFraming::Tcp)];
-        assert!(
-            validate(&port, &[])
-                .unwrap_err()
-                .contains("not an IP address")
-        );
-        let far = [peer("eos", "10.0.0.5", PeerFraming::Tcp)];
-        assert!(validate(&far, &[]).unwrap_err().contains("osc.allow"));
-        let allow = [Cidr::parse("10.0.0.0/8").unwrap()];
-        assert_eq!(validate(&far, &allow), Ok(()));
     }
 
     #[test]

@@ -289,7 +289,7 @@ impl Server {
             .iter()
             .map(|a| Cidr::parse(a).map_err(|e| format!("osc.allow: {e}")))
             .collect::<Result<Vec<_>, _>>()?;
-        super::peers::validate(&config.peer, &allow)?;
+        crate::config::validate_peers(&config.peer, &allow)?;
         let shared = Arc::new(Shared {
             handler,
             allow,
