@@ -1,10 +1,12 @@
 //! What the daemon's black-box tests share beside `visobjd_testkit`: the built binary, the
-//! length of a long run, the running daemon ([`daemon`]) and the capture stage
-//! ([`capture`]). Each test binary compiles it once; not every binary uses all of it.
+//! length of a long run, the running daemon ([`daemon`]), an HTTP client for its web page
+//! ([`http`]) and the capture stage ([`capture`]). Each test binary compiles it once; not
+//! every binary uses all of it.
 #![allow(dead_code)]
 
 pub mod capture;
 pub mod daemon;
+pub mod http;
 
 /// Path of the built `visobjd` binary.
 pub fn bin() -> &'static str {

@@ -14,6 +14,7 @@ use std::time::{Duration, Instant};
 
 use crate::common;
 use crate::common::daemon::{Daemon, Osc, PROTOS, UNIVERSES, int, num, string};
+use crate::common::http;
 use visobjd_testkit::tools;
 
 /// Look numbers the kill loop saves into.
@@ -212,7 +213,7 @@ impl Drop for Tmpfs {
 
 #[test]
 fn a_full_disk_refuses_the_save_and_the_show_goes_on() {
-    let mut d = Daemon::start("faults-full");
+    let (mut d, page) = http::start("faults-full");
     let from = first_frames(&d);
     let state = d.state_dir();
     // Mounting needs root (or CAP_SYS_ADMIN); the unwritable-file test above covers the
@@ -261,6 +262,25 @@ fn a_full_disk_refuses_the_save_and_the_show_goes_on() {
     ));
     for proto in PROTOS {
         d.wire.wait_look(proto, &picked);
+    }
+    // The web page hears the same sentences, as failures inside the daemon (500), not as
+    // its own mistakes: the save changes nothing, the pick goes on stage.
+    for (address, args, live) in [
+        ("/vo/look/save", serde_json::json!([2]), None),
+        ("/vo/pick", serde_json::json!([3]), Some(3)),
+    ] {
+        let r = http::osc(page, address, args, &[]);
+        assert_eq!(
+            r.status,
+            500,
+            "{address}: {}",
+            String::from_utf8_lossy(&r.body)
+        );
+        let e = r.json()["error"].as_str().unwrap_or_default().to_string();
+        assert!(e.contains("No space left"), "{address}: {e}");
+        if let Some(k) = live {
+            assert_eq!(d.status().entry, k);
+        }
     }
     d.ok("/vo/light/1/level", vec![int(60)], "/vo/light");
     assert_eq!(d.looks(), [(1, "before".to_string())]);
