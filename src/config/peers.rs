@@ -84,17 +84,25 @@ pub fn validate_peers(peers: &[PeerConfig], allow: &[Cidr]) -> Result<(), String
     Ok(())
 }
 
+/// A peer listening on port 9000, for the tests of the config and of the routes.
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn peer(name: &str, address: &str, framing: PeerFraming) -> PeerConfig {
+impl PeerConfig {
+    pub(crate) fn listening_at_9000(name: &str, address: &str, framing: PeerFraming) -> PeerConfig {
         PeerConfig {
             name: name.into(),
             address: address.into(),
             reply_port: 9000,
             framing,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn peer(name: &str, address: &str, framing: PeerFraming) -> PeerConfig {
+        PeerConfig::listening_at_9000(name, address, framing)
     }
 
     #[test]

@@ -79,20 +79,11 @@ impl Routes {
 mod tests {
     use super::*;
 
-    fn peer(name: &str, address: &str, framing: PeerFraming) -> PeerConfig {
-        PeerConfig {
-            name: name.into(),
-            address: address.into(),
-            reply_port: 9000,
-            framing,
-        }
-    }
-
     #[test]
     fn peers_are_found_by_ip_whatever_the_source_port() {
         let routes = Routes::new(&[
-            peer("tablet", "127.0.0.2", PeerFraming::Udp),
-            peer("eos", "127.0.0.3", PeerFraming::Slip),
+            PeerConfig::listening_at_9000("tablet", "127.0.0.2", PeerFraming::Udp),
+            PeerConfig::listening_at_9000("eos", "127.0.0.3", PeerFraming::Slip),
         ]);
         let from = |s: &str| s.parse::<SocketAddr>().unwrap();
         assert_eq!(

@@ -477,9 +477,9 @@ impl Shared {
                     && let Some(addr) = packet::first_address(bytes)
                 {
                     debug!("OSC: {addr} from {} is nested too deep", peer.addr);
-                    return vec![transport_error(
-                        addr,
-                        format!(
+                    return vec![super::error(
+                        &addr,
+                        &format!(
                             "the packet nests bundles or arrays deeper than {}; nothing in it ran",
                             packet::MAX_DEPTH
                         ),
@@ -502,9 +502,9 @@ impl Shared {
                 Item::Message(msg) => msg,
                 Item::Malformed { addr, why } => {
                     debug!("OSC: malformed {addr} from {}: {why}", peer.addr);
-                    replies.push(transport_error(
-                        addr,
-                        format!("the message is cut short or corrupt ({why}); nothing changed"),
+                    replies.push(super::error(
+                        &addr,
+                        &format!("the message is cut short or corrupt ({why}); nothing changed"),
                     ));
                     continue;
                 }
@@ -519,10 +519,7 @@ impl Shared {
                 Ok(r) => replies.extend(r),
                 Err(_) => {
                     error!("OSC: the handler panicked on {addr} from {}", peer.addr);
-                    replies.push(transport_error(
-                        addr,
-                        "internal error; see the daemon's log".into(),
-                    ));
+                    replies.push(super::error(&addr, "internal error; see the daemon's log"));
                 }
             }
         }
@@ -543,18 +540,13 @@ impl Shared {
             return None;
         };
         debug!("OSC over TCP: skipped {addr}, a frame of {len} bytes from {from}");
-        Some(transport_error(
-            addr,
-            format!(
+        Some(super::error(
+            &addr,
+            &format!(
                 "the packet is {len} bytes, over the {limit}-byte limit; it was dropped and nothing changed"
             ),
         ))
     }
-}
-
-/// `/vo/error <address> <message>` from the transport itself.
-fn transport_error(addr: String, message: String) -> OscMessage {
-    super::error(&addr, &message)
 }
 
 /// Datagrams waiting per UDP sender, with their total size. A sender is in the map exactly
@@ -1010,7 +1002,7 @@ mod tests {
     #[test]
     fn datagram_replies_are_cut_to_fit() {
         let long = "é".repeat(40_000);
-        let m = super::super::error(&long, &long);
+        let m = crate::osc::error(&long, &long);
         let bytes = encode_datagram(&m).unwrap();
         assert!(bytes.len() <= MAX_DATAGRAM, "{}", bytes.len());
         let (_, p) = rosc::decoder::decode_udp(&bytes).unwrap();

@@ -19,11 +19,10 @@ pub struct Sacn {
     pub dmx: Vec<u8>,
 }
 
-/// Decodes an E1.31 data packet; `None` for anything else (e.g. a sync packet).
-pub fn parse_sacn(p: &[u8]) -> Option<Sacn> {
-    if p.len() < 126 || p[18..22] != [0, 0, 0, 4] {
-        return None;
-    }
+/// Checks what every E1.31 packet starts with (E1.31 5 and 6: preamble and postamble
+/// sizes, the ACN packet identifier, the root and framing layers' flags and lengths), and
+/// returns the reader of a later layer's flags and length.
+fn root_and_framing(p: &[u8]) -> impl Fn(usize) -> u16 + '_ {
     assert_eq!(p[0..2], [0x00, 0x10], "preamble size");
     assert_eq!(p[2..4], [0, 0], "postamble size");
     assert_eq!(&p[4..16], ACN_ID, "ACN packet identifier");
@@ -38,6 +37,15 @@ pub fn parse_sacn(p: &[u8]) -> Option<Sacn> {
         0x7000 | (p.len() - 38) as u16,
         "framing flags+length"
     );
+    flags_len
+}
+
+/// Decodes an E1.31 data packet; `None` for anything else (e.g. a sync packet).
+pub fn parse_sacn(p: &[u8]) -> Option<Sacn> {
+    if p.len() < 126 || p[18..22] != [0, 0, 0, 4] {
+        return None;
+    }
+    let flags_len = root_and_framing(p);
     assert_eq!(
         p[40..44],
         [0, 0, 0, 2],
@@ -112,19 +120,7 @@ pub fn parse_discovery(p: &[u8]) -> Option<Discovery> {
         "discovery length {}",
         p.len()
     );
-    assert_eq!(p[0..2], [0x00, 0x10], "preamble size");
-    assert_eq!(&p[4..16], ACN_ID, "ACN packet identifier");
-    let flags_len = |at: usize| u16::from_be_bytes([p[at], p[at + 1]]);
-    assert_eq!(
-        flags_len(16),
-        0x7000 | (p.len() - 16) as u16,
-        "root flags+length"
-    );
-    assert_eq!(
-        flags_len(38),
-        0x7000 | (p.len() - 38) as u16,
-        "framing flags+length"
-    );
+    let flags_len = root_and_framing(p);
     assert_eq!(p[108..112], [0; 4], "reserved");
     assert_eq!(
         flags_len(112),
