@@ -1,9 +1,11 @@
 //! `visobjd run`: the daemon.
 //!
-//! Start-up order keeps the stage lit: the scene description (fast) and the saved live look
-//! come first and the DMX output starts sending it at once, before the basis images are
-//! read; only then does OSC open. sACN receivers hold a source for 2.5 s, so a restart
-//! never drops the stage.
+//! Start-up order keeps the stage lit and a second instance harmless: the state folder is
+//! locked and every socket (OSC, web, sACN input) bound first, so a `visobjd run` started
+//! by hand beside the service stops before it sends a frame; then the scene description
+//! (fast) and the saved live look, which the DMX output starts sending at once, before the
+//! basis images are read; only then does OSC answer. sACN receivers hold a source for
+//! 2.5 s, so a restart never drops the stage.
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -15,9 +17,12 @@ use crate::config::Config;
 use crate::engine::Engine;
 use crate::engine::persist::{Files, restore_live};
 use crate::engine::session::Session;
-use crate::osc::Server;
+use crate::http::Http;
+use crate::osc::server::Listeners;
+use crate::osc::{Limits, Server};
 use visobjd_dmx::Patch;
 use visobjd_dmx::{Input, Output};
+use visobjd_files::FolderLock;
 use visobjd_method::stage::{Stage, THUMB_WIDTH};
 use visobjd_scene::Scene;
 use visobjd_scene::look::Look;
@@ -41,6 +46,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let scene = Scene::load(&config.scene)?;
     std::fs::create_dir_all(&config.state_dir)
         .with_context(|| format!("state_dir {}: cannot create it", config.state_dir.display()))?;
+    // Nothing goes on the wire before the folder is ours and every socket is bound.
+    let _lock = FolderLock::take(&config.state_dir).map_err(anyhow::Error::msg)?;
+    let osc = Listeners::bind(&config.osc).map_err(anyhow::Error::msg)?;
+    let web = (!config.http.listen.is_empty())
+        .then(|| Http::bind(&config.http.listen))
+        .transpose()
+        .map_err(anyhow::Error::msg)?;
+    let input_socket = config
+        .input
+        .sacn
+        .as_ref()
+        .map(Input::open)
+        .transpose()
+        .map_err(|e| anyhow::anyhow!("{}: {e}", config.path.display()))?;
 
     // The stage first: the saved live look goes out before anything slow happens.
     let files = Files::new(&config.state_dir);
@@ -71,7 +90,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .input
         .sacn
         .as_ref()
-        .map(|c| Input::start(c, output.cid()))
+        .zip(input_socket)
+        .map(|(c, socket)| Input::start(c, socket, output.cid()))
         .transpose()
         .map_err(|e| anyhow::anyhow!("{}: {e}", config.path.display()))?;
 
@@ -98,7 +118,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .enable_all()
         .build()
         .context("cannot start the async runtime")?;
-    let result = runtime.block_on(serve(&config, &engine));
+    let result = runtime.block_on(serve(&config, &engine, osc, web));
     crate::shutdown::finish(&engine);
     result
 }
@@ -124,18 +144,21 @@ async fn watchdog(engine: Arc<Engine>, period: std::time::Duration) {
     }
 }
 
-async fn serve(config: &Config, engine: &Arc<Engine>) -> anyhow::Result<()> {
+async fn serve(
+    config: &Config,
+    engine: &Arc<Engine>,
+    osc: Listeners,
+    web: Option<std::net::TcpListener>,
+) -> anyhow::Result<()> {
     let runner = Runner::new(Arc::clone(engine));
-    let server =
-        Server::start(&config.osc, Arc::new(runner.clone())).map_err(anyhow::Error::msg)?;
+    let server = Server::serve(osc, Arc::new(runner.clone()), Limits::default())
+        .map_err(anyhow::Error::msg)?;
     if let Some(sender) = server.sender() {
         engine.set_pusher(sender);
     }
-    let http = if config.http.listen.is_empty() {
-        None
-    } else {
-        let http = crate::http::Http::start(
-            &config.http.listen,
+    let http = if let Some(listener) = web {
+        let http = Http::start(
+            listener,
             config.allow_list(),
             crate::http::Access {
                 password: (!config.http.password.is_empty()).then(|| config.http.password.clone()),
@@ -144,10 +167,11 @@ async fn serve(config: &Config, engine: &Arc<Engine>) -> anyhow::Result<()> {
             Arc::clone(engine),
             runner.clone(),
         )
-        .await
         .map_err(anyhow::Error::msg)?;
         tracing::info!("web gallery on http://{}/", http.addr());
         Some(http)
+    } else {
+        None
     };
     let _ = sd_notify::notify(&[sd_notify::NotifyState::Ready]);
     let mut tasks = Vec::new();

@@ -59,21 +59,27 @@ pub struct Http {
 }
 
 impl Http {
-    /// Binds `listen` and serves in the current tokio runtime: reads from `engine`,
-    /// changes through `runner`.
-    pub async fn start(
-        listen: &str,
+    /// Binds `listen` (`http.listen`), before the daemon's first DMX frame.
+    pub fn bind(listen: &str) -> Result<std::net::TcpListener, String> {
+        std::net::TcpListener::bind(listen)
+            .and_then(|l| l.set_nonblocking(true).map(|()| l))
+            .map_err(|e| format!("http.listen {listen}: cannot listen there: {e}"))
+    }
+
+    /// Serves `listener` (from [`Http::bind`]) in the current tokio runtime: reads from
+    /// `engine`, changes through `runner`.
+    pub fn start(
+        listener: std::net::TcpListener,
         allow: Vec<Cidr>,
         access: Access,
         engine: Arc<Engine>,
         runner: Runner,
     ) -> Result<Http, String> {
-        let listener = TcpListener::bind(listen)
-            .await
-            .map_err(|e| format!("http.listen {listen}: cannot listen there: {e}"))?;
         let addr = listener
             .local_addr()
-            .map_err(|e| format!("http.listen {listen}: {e}"))?;
+            .map_err(|e| format!("http.listen: {e}"))?;
+        let listener =
+            TcpListener::from_std(listener).map_err(|e| format!("http.listen {addr}: {e}"))?;
         let shared = Arc::new(Shared {
             engine,
             runner,

@@ -268,10 +268,50 @@ pub struct Server {
     tasks: Vec<JoinHandle<()>>,
 }
 
+/// The `[osc]` sockets bound but not yet served, with the allow-list and peers checked:
+/// the daemon binds every socket it needs before its first DMX frame, so a second
+/// instance on taken ports stops before it sends anything.
+pub struct Listeners {
+    udp: Option<std::net::UdpSocket>,
+    tcp: Option<std::net::TcpListener>,
+    allow: Vec<Cidr>,
+    routes: Routes,
+    reply_port: u16,
+}
+
+impl Listeners {
+    /// Checks `config` and binds its addresses ("" leaves one off). Errors name the config
+    /// key and address: "osc.udp 127.0.0.1:8000: address already in use".
+    pub fn bind(config: &OscConfig) -> Result<Listeners, String> {
+        let allow = config
+            .allow
+            .iter()
+            .map(|a| Cidr::parse(a).map_err(|e| format!("osc.allow: {e}")))
+            .collect::<Result<Vec<_>, _>>()?;
+        crate::config::validate_peers(&config.peer, &allow)?;
+        let udp = listen_addr("osc.udp", &config.udp)?
+            .map(|addr| bind_udp(addr).map_err(|e| format!("osc.udp {addr}: {}", plain(&e))))
+            .transpose()?;
+        let tcp = listen_addr("osc.tcp", &config.tcp)?
+            .map(|addr| {
+                std::net::TcpListener::bind(addr)
+                    .and_then(|l| l.set_nonblocking(true).map(|()| l))
+                    .map_err(|e| format!("osc.tcp {addr}: {}", plain(&e)))
+            })
+            .transpose()?;
+        Ok(Listeners {
+            udp,
+            tcp,
+            allow,
+            routes: Routes::new(&config.peer),
+            reply_port: config.reply_port,
+        })
+    }
+}
+
 impl Server {
-    /// Binds the `[osc]` addresses ("" leaves one off) and starts serving with default
-    /// [`Limits`]. Must be called inside a tokio runtime. Errors name the config key and
-    /// address: "osc.udp 127.0.0.1:8000: address already in use".
+    /// Binds the `[osc]` addresses and starts serving with default [`Limits`]. Must be
+    /// called inside a tokio runtime.
     pub fn start(config: &OscConfig, handler: Arc<dyn Handler>) -> Result<Server, String> {
         Server::start_with_limits(config, handler, Limits::default())
     }
@@ -282,20 +322,30 @@ impl Server {
         handler: Arc<dyn Handler>,
         limits: Limits,
     ) -> Result<Server, String> {
+        Server::serve(Listeners::bind(config)?, handler, limits)
+    }
+
+    /// Serves sockets bound earlier. Must be called inside a tokio runtime.
+    pub fn serve(
+        listeners: Listeners,
+        handler: Arc<dyn Handler>,
+        limits: Limits,
+    ) -> Result<Server, String> {
         tokio::runtime::Handle::try_current()
             .map_err(|_| "osc: the server must be started inside a tokio runtime".to_string())?;
-        let allow = config
-            .allow
-            .iter()
-            .map(|a| Cidr::parse(a).map_err(|e| format!("osc.allow: {e}")))
-            .collect::<Result<Vec<_>, _>>()?;
-        crate::config::validate_peers(&config.peer, &allow)?;
+        let Listeners {
+            udp,
+            tcp,
+            allow,
+            routes,
+            reply_port,
+        } = listeners;
         let shared = Arc::new(Shared {
             handler,
             allow,
-            routes: Routes::new(&config.peer),
+            routes,
             runtime: Handle::current(),
-            reply_port: config.reply_port,
+            reply_port,
             limits,
             refused: AtomicU64::new(0),
             not_osc: AtomicU64::new(0),
@@ -313,17 +363,15 @@ impl Server {
             shared: shared.clone(),
             tasks: Vec::new(),
         };
-        if let Some(addr) = listen_addr("osc.udp", &config.udp)? {
-            let socket = bind_udp(addr)
-                .and_then(UdpSocket::from_std)
-                .map_err(|e| format!("osc.udp {addr}: {}", plain(&e)))?;
-            let socket = Arc::new(socket);
+        if let Some(socket) = udp {
             let local = socket
                 .local_addr()
-                .map_err(|e| format!("osc.udp {addr}: {}", plain(&e)))?;
+                .map_err(|e| format!("osc.udp: {}", plain(&e)))?;
+            let socket = UdpSocket::from_std(socket)
+                .map_err(|e| format!("osc.udp {local}: {}", plain(&e)))?;
             info!("OSC over UDP on {local}");
             let sender = Sender {
-                socket,
+                socket: Arc::new(socket),
                 shared: Arc::downgrade(&shared),
             };
             server.udp_addr = Some(local);
@@ -332,14 +380,12 @@ impl Server {
                 .tasks
                 .push(tokio::spawn(udp_loop(sender, shared.clone())));
         }
-        if let Some(addr) = listen_addr("osc.tcp", &config.tcp)? {
-            let listener = std::net::TcpListener::bind(addr)
-                .and_then(|l| l.set_nonblocking(true).map(|()| l))
-                .and_then(TcpListener::from_std)
-                .map_err(|e| format!("osc.tcp {addr}: {}", plain(&e)))?;
+        if let Some(listener) = tcp {
             let local = listener
                 .local_addr()
-                .map_err(|e| format!("osc.tcp {addr}: {}", plain(&e)))?;
+                .map_err(|e| format!("osc.tcp: {}", plain(&e)))?;
+            let listener = TcpListener::from_std(listener)
+                .map_err(|e| format!("osc.tcp {local}: {}", plain(&e)))?;
             info!("OSC over TCP on {local}");
             server.tcp_addr = Some(local);
             server.tasks.push(tokio::spawn(tcp_loop(listener, shared)));

@@ -741,6 +741,8 @@ pub const PROTOS: [Proto; 2] = [Proto::Sacn, Proto::Artnet];
 #[derive(Debug, Clone)]
 pub struct DmxPacket {
     pub at: Instant,
+    /// The sender's address (its socket: a second process sends from another port).
+    pub from: SocketAddr,
     pub sequence: u8,
     /// sACN Stream_Terminated (always false for Art-Net).
     pub terminated: bool,
@@ -773,13 +775,14 @@ pub struct Wire {
 /// Art-Net port-address = scene universe + this (config `universe_offset`).
 pub const ARTNET_OFFSET: i32 = -1;
 
-fn decode(proto: Proto, p: &[u8], at: Instant) -> Option<(u16, DmxPacket)> {
+fn decode(proto: Proto, p: &[u8], at: Instant, from: SocketAddr) -> Option<(u16, DmxPacket)> {
     match proto {
         Proto::Sacn => parse_sacn(p).map(|s| {
             (
                 s.universe,
                 DmxPacket {
                     at,
+                    from,
                     sequence: s.sequence,
                     terminated: s.terminated,
                     cid: s.cid,
@@ -796,6 +799,7 @@ fn decode(proto: Proto, p: &[u8], at: Instant) -> Option<(u16, DmxPacket)> {
                 universe,
                 DmxPacket {
                     at,
+                    from,
                     sequence: a.sequence,
                     terminated: false,
                     cid: [0; 16],
@@ -824,13 +828,13 @@ impl Wire {
                 std::thread::spawn(move || {
                     let mut buf = [0u8; 2048];
                     while !stop.load(Ordering::Relaxed) {
-                        let Ok(n) = sock.recv(&mut buf) else {
+                        let Ok((n, from)) = sock.recv_from(&mut buf) else {
                             log.lock().expect("log").idle.insert(proto, Instant::now());
                             continue;
                         };
                         let at = visobjd_dmx::kernel_arrival(&sock, Instant::now());
                         let p = buf[..n].to_vec();
-                        let got = std::panic::catch_unwind(|| decode(proto, &p, at));
+                        let got = std::panic::catch_unwind(|| decode(proto, &p, at, from));
                         let mut log = log.lock().expect("log");
                         match got {
                             Ok(Some((u, f))) => log.frames.entry((proto, u)).or_default().push(f),
@@ -1299,6 +1303,11 @@ impl Daemon {
 
     pub fn state_dir(&self) -> PathBuf {
         self.dir.join("state")
+    }
+
+    /// The config file the daemon runs.
+    pub fn config_path(&self) -> &Path {
+        &self.config
     }
 
     /// A new UDP client from its own port.

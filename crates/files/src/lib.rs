@@ -2,6 +2,10 @@
 //! (temp file, fsync, rename, fsync of the folder), so a reader only ever sees the old or
 //! the new version; a file that does not parse is moved aside, never deleted.
 
+mod lock;
+
+pub use lock::FolderLock;
+
 use std::fs::{self, File};
 use std::io::Write;
 use std::path::{Path, PathBuf};

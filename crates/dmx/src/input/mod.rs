@@ -41,6 +41,14 @@ pub struct Console {
     pub sources: usize,
 }
 
+/// The input's socket, bound and joined, not yet read ([`Input::open`]).
+#[derive(Debug)]
+pub struct InputSocket {
+    socket: UdpSocket,
+    bind: SocketAddr,
+    interface: Option<Ipv4Addr>,
+}
+
 /// The running receiver. Dropping it stops the thread like [`Input::shutdown`].
 #[derive(Debug)]
 pub struct Input {
@@ -53,10 +61,10 @@ pub struct Input {
 }
 
 impl Input {
-    /// Binds `config.bind`, joins the universes' multicast groups on `config.interface` (if
-    /// set) and starts receiving. Packets from `own` (visobjd's output CID) are ignored.
-    /// The error is a sentence naming the key.
-    pub fn start(config: &SacnInput, own: Uuid) -> Result<Input, String> {
+    /// Binds `config.bind` and joins the universes' multicast groups on
+    /// `config.interface` (if set): the daemon binds every socket before its first DMX
+    /// frame. The error is a sentence naming the key.
+    pub fn open(config: &SacnInput) -> Result<InputSocket, String> {
         let (bind, interface) = config.addresses()?;
         let socket = UdpSocket::bind(bind)
             .map_err(|e| format!("input.sacn.bind: cannot bind {bind}: {e}"))?;
@@ -74,6 +82,21 @@ impl Input {
         socket
             .set_read_timeout(Some(IDLE_WAKE))
             .map_err(|e| format!("input.sacn: cannot set a read timeout: {e}"))?;
+        Ok(InputSocket {
+            socket,
+            bind,
+            interface,
+        })
+    }
+
+    /// Starts receiving on `socket` (from [`Input::open`] with the same `config`).
+    /// Packets from `own` (visobjd's output CID) are ignored.
+    pub fn start(config: &SacnInput, socket: InputSocket, own: Uuid) -> Result<Input, String> {
+        let InputSocket {
+            socket,
+            bind,
+            interface,
+        } = socket;
         let merger = Arc::new(Mutex::new(Merger::new(own, &config.universes)));
         let (tx, changes) = watch::channel(0u64);
         let stop = Arc::new(AtomicBool::new(false));

@@ -1,0 +1,120 @@
+//! Starting beside a running daemon: a second `visobjd run` (a technician starting it by
+//! hand while the service runs) on the same state folder, or on the same ports, stops with
+//! a sentence before it sends a single DMX packet, and the running daemon's stream goes on.
+
+use std::collections::BTreeSet;
+use std::net::SocketAddr;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use crate::common::bin;
+use crate::common::daemon::{Daemon, PATIENCE, PROTOS, UNIVERSES};
+
+/// Every sender address seen on the wire from `since`, and whether any sACN packet since
+/// then terminated its stream.
+fn senders(d: &Daemon, since: Instant) -> (BTreeSet<SocketAddr>, bool) {
+    let mut from = BTreeSet::new();
+    let mut terminated = false;
+    for proto in PROTOS {
+        for u in UNIVERSES {
+            for f in d.wire.frames(proto, u, since) {
+                from.insert(f.from);
+                terminated |= f.terminated;
+            }
+        }
+    }
+    (from, terminated)
+}
+
+/// Runs a second `visobjd run --config config` to its end (bounded) and returns its exit
+/// status and stderr.
+fn second_instance(config: &std::path::Path) -> (std::process::ExitStatus, String) {
+    let mut child = Command::new(bin())
+        .args(["run", "--config"])
+        .arg(config)
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("visobjd starts");
+    let end = Instant::now() + PATIENCE * 2;
+    loop {
+        if let Some(status) = child.try_wait().expect("wait") {
+            let out = child.wait_with_output().expect("stderr");
+            return (status, String::from_utf8_lossy(&out.stderr).into_owned());
+        }
+        if Instant::now() > end {
+            let _ = child.kill();
+            let out = child.wait_with_output().expect("stderr");
+            panic!(
+                "the second instance was still running after {:?}:\n{}",
+                PATIENCE * 2,
+                String::from_utf8_lossy(&out.stderr)
+            );
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
+/// Asserts that from `since` only the first daemon's sockets sent, and nothing
+/// terminated a stream, once frames sent after the second instance ended have arrived.
+fn assert_only_the_first_sent(d: &Daemon, before: &BTreeSet<SocketAddr>, since: Instant) {
+    let ended = Instant::now();
+    d.wire.wait_frames_after(ended, "the second instance");
+    d.wire.drained_after(Instant::now());
+    let (after, terminated) = senders(d, since);
+    let strangers: Vec<_> = after.difference(before).collect();
+    assert!(
+        strangers.is_empty(),
+        "the second instance sent DMX from {strangers:?} (the first sends from {before:?})"
+    );
+    assert!(!terminated, "a Stream_Terminated packet went out");
+    d.wire
+        .assert_continuous(since, ended, Duration::from_millis(250), "the second start");
+}
+
+#[test]
+fn a_second_instance_on_the_same_state_folder_sends_nothing() {
+    let d = Daemon::start("second-same-folder");
+    let warm = Instant::now();
+    d.wire.wait_frames_after(warm, "the start");
+    let (before, _) = senders(&d, warm);
+    assert!(!before.is_empty());
+
+    let since = Instant::now();
+    let (status, stderr) = second_instance(d.config_path());
+    assert!(
+        !status.success(),
+        "the second instance succeeded:\n{stderr}"
+    );
+    assert!(
+        stderr.contains(&format!("is in use by another visobjd (pid {})", d.pid())),
+        "{stderr}"
+    );
+    assert_only_the_first_sent(&d, &before, since);
+}
+
+#[test]
+fn a_second_instance_on_taken_ports_sends_nothing() {
+    let d = Daemon::start("second-taken-ports");
+    let warm = Instant::now();
+    d.wire.wait_frames_after(warm, "the start");
+    let (before, _) = senders(&d, warm);
+
+    // Its own state folder (so its own CID and lock), the same OSC ports.
+    let text = std::fs::read_to_string(d.config_path()).expect("config");
+    let other = d.dir.join("second.toml");
+    std::fs::write(
+        &other,
+        text.replace("state_dir = \"state\"", "state_dir = \"state-2\""),
+    )
+    .expect("write the second config");
+    let since = Instant::now();
+    let (status, stderr) = second_instance(&other);
+    assert!(
+        !status.success(),
+        "the second instance succeeded:\n{stderr}"
+    );
+    assert!(stderr.contains("address already in use"), "{stderr}");
+    assert_only_the_first_sent(&d, &before, since);
+}
