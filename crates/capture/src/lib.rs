@@ -830,6 +830,7 @@ impl Session<'_> {
             levels: lit.iter().map(|&l| look.levels[l]).collect(),
         };
         let mut basis = visobjd_compositor::basis::load(&part, &[(0, Precision::Single)])
+            .and_then(visobjd_compositor::basis::Loaded::all)
             .map_err(|e| CaptureError::Files(e.to_string()))?
             .pop()
             .ok_or_else(|| CaptureError::Files("no basis images".into()))?;

@@ -393,27 +393,90 @@ fn decode(path: &Path) -> Result<(usize, usize, [Vec<f32>; 3]), SceneError> {
     Ok((img.width, img.height, planes))
 }
 
+/// A light whose basis image (or one of its per-emitter images) cannot be used: missing,
+/// corrupt, not finite or of another size. Its images are left black, so it adds nothing
+/// to a preview; the stage leaves it out of generation and names it.
+#[derive(Debug)]
+pub struct Unseen {
+    /// The light (index into the scene's lights).
+    pub light: usize,
+    /// Why, naming the file.
+    pub error: SceneError,
+}
+
+/// What [`load`] made of a scene's images.
+#[derive(Debug)]
+pub struct Loaded {
+    /// One set of images per requested width.
+    pub images: Vec<BasisImages>,
+    /// The lights whose images could not be used, in light order.
+    pub unseen: Vec<Unseen>,
+}
+
+impl Loaded {
+    /// The images if every light's could be used, else the first unseen light's error
+    /// (a check that compares against every image needs them all).
+    pub fn all(self) -> Result<Vec<BasisImages>, SceneError> {
+        match self.unseen.into_iter().next() {
+            Some(u) => Err(u.error),
+            None => Ok(self.images),
+        }
+    }
+}
+
 /// Loads every light's basis image and keeps it at each requested width (0 = full size)
 /// and precision.
 ///
 /// Each EXR is decoded once and written straight into the final packed images (no second
-/// copy of the basis ever exists, so resident memory stays close to what is kept). All
-/// images must share one size, or the scene does not load and the error names the odd
-/// file. If a sample exceeds half-float range, the scene is loaded again in single
+/// copy of the basis ever exists, so resident memory stays close to what is kept). The
+/// first white image that reads sets the size; a light whose image is missing, corrupt or
+/// of another size is left black and listed in [`Loaded::unseen`], so one bad file never
+/// keeps the rest of the rig from loading. Only a scene none of whose white images reads is
+/// an error. If a sample exceeds half-float range, the scene is loaded again in single
 /// precision.
-pub fn load(scene: &Scene, widths: &[(usize, Precision)]) -> Result<Vec<BasisImages>, SceneError> {
-    let first = decode(&scene.lights[0].basis)?;
+pub fn load(scene: &Scene, widths: &[(usize, Precision)]) -> Result<Loaded, SceneError> {
+    let mut unseen = Vec::new();
+    let mut first = None;
+    for (l, light) in scene.lights.iter().enumerate() {
+        match decode(&light.basis) {
+            Ok(d) => {
+                first = Some((l, d));
+                break;
+            }
+            Err(error) => unseen.push(Unseen { light: l, error }),
+        }
+    }
+    let Some((first_light, first)) = first else {
+        return Err(match unseen.into_iter().next() {
+            Some(u) => SceneError::Basis {
+                path: scene.lights[0].basis.clone(),
+                message: format!(
+                    "no basis image of the scene can be read; the first: {}",
+                    u.error
+                ),
+            },
+            None => SceneError::Invalid {
+                path: scene.dir.join("scene.toml"),
+                message: "has no lights".into(),
+            },
+        });
+    };
     let (w, h) = (first.0, first.1);
+    let reference = scene.lights[first_light].basis.clone();
     let lights = scene.lights.len();
-    // Every image in panel order: the lights' white images, then the per-emitter ones.
+    // Every image in panel order: the lights' white images, then the per-emitter ones,
+    // each with the light it belongs to.
     let mut files: Vec<&Path> = scene.lights.iter().map(|l| l.basis.as_path()).collect();
+    let mut owner: Vec<usize> = (0..lights).collect();
     let emitter_images: Vec<Option<usize>> = scene
         .lights
         .iter()
-        .map(|l| {
-            (!l.emitter_basis.is_empty()).then(|| {
+        .enumerate()
+        .map(|(l, light)| {
+            (!light.emitter_basis.is_empty()).then(|| {
                 let first = files.len();
-                files.extend(l.emitter_basis.iter().map(PathBuf::as_path));
+                files.extend(light.emitter_basis.iter().map(PathBuf::as_path));
+                owner.resize(files.len(), l);
                 first
             })
         })
@@ -438,13 +501,23 @@ pub fn load(scene: &Scene, widths: &[(usize, Precision)]) -> Result<Vec<BasisIma
             slot.push(rows);
         }
     }
+    let skip: Vec<bool> = {
+        let mut skip = vec![false; files.len()];
+        for u in &unseen {
+            skip[u.light] = true;
+        }
+        skip
+    };
     let first = std::sync::Mutex::new(Some(first));
     let results: Vec<Result<bool, SceneError>> = files
         .par_iter()
         .zip(slots)
         .enumerate()
         .map(|(i, (&file, slots))| {
-            let taken = if i == 0 {
+            if skip[i] {
+                return Ok(false);
+            }
+            let taken = if i == first_light {
                 first.lock().map_or(None, |mut f| f.take())
             } else {
                 None
@@ -458,7 +531,7 @@ pub fn load(scene: &Scene, widths: &[(usize, Precision)]) -> Result<Vec<BasisIma
                     path: file.to_path_buf(),
                     message: format!(
                         "is {lw}x{lh} but {} is {w}x{h}; every basis image must have the same size",
-                        scene.lights[0].basis.display()
+                        reference.display()
                     ),
                 });
             }
@@ -472,8 +545,14 @@ pub fn load(scene: &Scene, widths: &[(usize, Precision)]) -> Result<Vec<BasisIma
         })
         .collect();
     let mut overflow = false;
-    for r in results {
-        overflow |= r?;
+    for (i, r) in results.into_iter().enumerate() {
+        match r {
+            Ok(o) => overflow |= o,
+            Err(error) => unseen.push(Unseen {
+                light: owner[i],
+                error,
+            }),
+        }
     }
     if overflow {
         let single: Vec<(usize, Precision)> = widths
@@ -482,11 +561,31 @@ pub fn load(scene: &Scene, widths: &[(usize, Precision)]) -> Result<Vec<BasisIma
             .collect();
         return load(scene, &single);
     }
+    // One entry per light (its first bad file), and none of its images left lit.
+    unseen.sort_by_key(|u| u.light);
+    unseen.dedup_by_key(|u| u.light);
+    if !unseen.is_empty() {
+        let dark: Vec<bool> = owner
+            .iter()
+            .map(|l| unseen.iter().any(|u| u.light == *l))
+            .collect();
+        for img in &mut images {
+            let zero: [Vec<f32>; 3] = std::array::from_fn(|_| vec![0.0; img.width * img.height]);
+            for (rows, _) in img
+                .rows_by_image()
+                .into_iter()
+                .zip(&dark)
+                .filter(|(_, d)| **d)
+            {
+                rows.fill(&zero);
+            }
+        }
+    }
     let colours: Vec<ColourModel> = (0..lights).map(|l| scene.colour_model(l)).collect();
     for img in &mut images {
         img.colours.clone_from(&colours);
     }
-    Ok(images)
+    Ok(Loaded { images, unseen })
 }
 
 #[cfg(test)]

@@ -700,3 +700,111 @@ fn sacn_universe_discovery_lists_the_universes() {
     out.shutdown();
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn a_rewire_moves_the_rig_without_a_gap_and_ends_only_the_streams_it_drops() {
+    let rig = rig(40);
+    let dir = state_dir("rewire");
+    let out = start(&rig.config, &dir, look(1.0, [1.0; 3]));
+    wait_sacn(&rig.sacn, 2, |s| !s.terminated);
+    let second = receiver();
+
+    // The new patch: one universe, the dimmer moved to 1/20; the old destination kept and
+    // a second one added.
+    let moved = Scene::parse(
+        Path::new("/nonexistent"),
+        "[[light]]\nchannel = 1\nbasis = \"a.exr\"\nprofile = \"irgb\"\nuniverse = 1\naddress = 1\n\n\
+         [[light]]\nchannel = 3\nbasis = \"c.exr\"\nprofile = \"dimmer\"\nuniverse = 1\naddress = 20\n",
+    )
+    .expect("scene parses");
+    let mut config = rig.config.clone();
+    config.sacn.push(SacnDest {
+        port: second.local_addr().expect("addr").port(),
+        ..config.sacn[0].clone()
+    });
+    let before = Instant::now();
+    let lit = Look {
+        levels: vec![
+            Level {
+                intensity: 1.0,
+                color: [1.0; 3]
+            };
+            2
+        ],
+    };
+    out.rewire(&config, Patch::new(&moved), lit)
+        .expect("the rewire binds");
+    let (got, ok) = receive_until(&rig.sacn, Duration::from_secs(3), |p| {
+        parse_sacn(p).is_some_and(|s| s.universe == 1 && s.dmx[19] == 255)
+    });
+    assert!(ok, "the moved dimmer never showed at 1/20");
+    let (after, _) = receive_until(&rig.sacn, Duration::from_millis(300), |_| false);
+    let all: Vec<(Instant, Sacn)> = got
+        .into_iter()
+        .chain(after)
+        .filter_map(|(t, p)| parse_sacn(&p).map(|s| (t, s)))
+        .collect();
+    // Universe 1 goes on: same CID, consecutive sequence numbers, no gap over two periods.
+    let one: Vec<&(Instant, Sacn)> = all.iter().filter(|(_, s)| s.universe == 1).collect();
+    for w in one.windows(2) {
+        assert!(!w[1].1.terminated, "universe 1 was terminated");
+        assert_eq!(w[1].1.cid, w[0].1.cid);
+        assert_eq!(
+            w[1].1.sequence,
+            w[0].1.sequence.wrapping_add(1),
+            "universe 1's sequence across the rewire"
+        );
+        let gap = w[1].0 - w[0].0;
+        assert!(
+            gap < Duration::from_millis(50),
+            "a gap of {gap:?} across the rewire"
+        );
+    }
+    assert!(
+        one.first()
+            .is_some_and(|(t, _)| *t - before < Duration::from_millis(50))
+    );
+    // Universe 2, no longer patched, ends as at a shutdown: three terminations, then nothing.
+    let two: Vec<&Sacn> = all
+        .iter()
+        .filter(|(_, s)| s.universe == 2)
+        .map(|(_, s)| s)
+        .collect();
+    assert_eq!(
+        two.iter().filter(|s| s.terminated).count(),
+        3,
+        "{}",
+        two.len()
+    );
+    assert!(
+        two.last().is_some_and(|s| s.terminated),
+        "universe 2 went on"
+    );
+    // The new destination gets the new patch.
+    let new = wait_sacn(&second, 1, |s| s.dmx[19] == 255);
+    assert_eq!(new.cid, *out.cid().as_bytes());
+    assert_eq!(out.stats().destinations.len(), 3);
+    out.shutdown();
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn a_rewire_that_cannot_bind_changes_nothing() {
+    let rig = rig(40);
+    let dir = state_dir("rewire-bind");
+    let out = start(&rig.config, &dir, look(1.0, [1.0; 3]));
+    wait_sacn(&rig.sacn, 2, |s| !s.terminated);
+    let taken = UdpSocket::bind("127.0.0.1:0").expect("bind");
+    let mut config = rig.config.clone();
+    config.sacn[0].bind = taken.local_addr().expect("addr");
+    let err = out
+        .rewire(&config, Patch::new(&scene()), look(0.0, [1.0; 3]))
+        .expect_err("the bind is taken");
+    assert!(err.to_string().contains("cannot bind"), "{err}");
+    // Both universes still at full from the old wiring.
+    let s = wait_sacn(&rig.sacn, 2, |_| true);
+    assert_eq!(s.dmx[9], 255);
+    assert!(!s.terminated);
+    out.shutdown();
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -7,7 +7,7 @@ use crate::gallery::{Generation, PROXY_WIDTH, Size};
 use crate::objective::Objective;
 use crate::sampler::{Constraints, LightGroups, Plan, Spread, Target};
 use crate::targeting::{Footprints, WORKING_WIDTH};
-use visobjd_compositor::basis::{self, BasisImages, Precision};
+use visobjd_compositor::basis::{self, BasisImages, Loaded, Precision, Unseen};
 use visobjd_compositor::render::{exposure_gain, render_srgb8};
 use visobjd_scene::look::Look;
 use visobjd_scene::{Scene, SceneError};
@@ -37,6 +37,10 @@ pub struct Stage {
     pub thumbs: BasisImages,
     /// Linear gain of the scene's exposure.
     pub gain: f32,
+    /// Lights whose images could not be used: black in every preview and left out of
+    /// generation (each keeps its level in the base look, as a locked light does), so a
+    /// generate never moves a light it cannot see.
+    pub unseen: Vec<Unseen>,
 }
 
 impl Stage {
@@ -52,7 +56,10 @@ impl Stage {
         // Targeting measures the working size exactly and the small proxy is used in place;
         // thumbnails, most of the bytes, are stored as half floats (half the memory and
         // memory traffic, invisible in 8-bit output).
-        let mut sizes = basis::load(
+        let Loaded {
+            images: mut sizes,
+            unseen,
+        } = basis::load(
             &scene,
             &[
                 (WORKING_WIDTH, Precision::Single),
@@ -70,6 +77,7 @@ impl Stage {
             scene,
             proxy,
             thumbs,
+            unseen,
         })
     }
 
@@ -113,9 +121,15 @@ impl Stage {
         mut progress: impl FnMut(f32) + Send,
     ) -> Generation {
         let targets: Vec<Target> = request.objectives.iter().map(|o| self.target(o)).collect();
+        let mut constraints = request.constraints.clone();
+        for u in &self.unseen {
+            if let Some(locked) = constraints.locked.get_mut(u.light) {
+                *locked = true;
+            }
+        }
         let plan = Plan::new(
             &self.rig,
-            request.constraints,
+            &constraints,
             &targets,
             request.base,
             request.spread,
@@ -200,6 +214,7 @@ mod tests {
             scene,
             proxy: at(Precision::Single),
             thumbs: at(Precision::Half),
+            unseen: Vec::new(),
         }
     }
 
@@ -276,6 +291,28 @@ mod tests {
         let (again, twice) = run(&st, 300, 7);
         assert_eq!(seen, twice);
         assert_eq!(g.candidates, again.candidates);
+    }
+
+    #[test]
+    fn a_light_whose_image_is_unseen_keeps_its_base_level_in_every_candidate() {
+        let mut st = stage(6);
+        st.unseen.push(Unseen {
+            light: 2,
+            error: SceneError::Basis {
+                path: "basis/003.exr".into(),
+                message: "not found".into(),
+            },
+        });
+        let (g, _) = run(&st, 60, 5);
+        assert!(
+            g.candidates.iter().all(|c| c.levels[2].intensity == 0.0),
+            "the unseen light moved"
+        );
+        let moved = |l: usize| g.candidates.iter().any(|c| c.levels[l].intensity > 0.0);
+        assert!(
+            (0..6).filter(|&l| l != 2).any(moved),
+            "nothing moved at all"
+        );
     }
 
     #[test]
