@@ -14,16 +14,15 @@ use anyhow::Context;
 
 use crate::cmd::Runner;
 use crate::config::Config;
-use crate::engine::Engine;
 use crate::engine::persist::{Files, restore_live};
 use crate::engine::session::Session;
+use crate::engine::{Engine, Loaded, keep_scene};
 use crate::http::Http;
 use crate::osc::server::Listeners;
 use crate::osc::{Limits, Server};
 use visobjd_dmx::Patch;
 use visobjd_dmx::{Input, Output};
 use visobjd_files::FolderLock;
-use visobjd_method::stage::{Stage, THUMB_WIDTH};
 use visobjd_scene::Scene;
 use visobjd_scene::look::Look;
 
@@ -43,7 +42,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     super::start_compute_pool();
 
     let config = Config::load(&args.config).map_err(anyhow::Error::msg)?;
-    let scene = Scene::load(&config.scene)?;
     std::fs::create_dir_all(&config.state_dir)
         .with_context(|| format!("state_dir {}: cannot create it", config.state_dir.display()))?;
     // Nothing goes on the wire before the folder is ours and every socket is bound.
@@ -60,6 +58,22 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .map(Input::open)
         .transpose()
         .map_err(|e| anyhow::anyhow!("{}: {e}", config.path.display()))?;
+
+    // The patch: the scene's description, or, when it is broken, the one that loaded last
+    // (so the saved look stays on the wire while someone fixes it).
+    let (scene, stand_in) = match Scene::load(&config.scene) {
+        Ok(scene) => (scene, None),
+        Err(e) => {
+            let why = e.to_string();
+            let Some(stand_in) = Loaded::last_scene(&config.scene, &config.state_dir, &why) else {
+                anyhow::bail!(
+                    "{why} (no scene has loaded from this state folder before, so there is no \
+                     patch to keep the stage on)"
+                );
+            };
+            (stand_in.stage.scene.clone(), Some(stand_in))
+        }
+    };
 
     // The stage first: the saved live look goes out before anything slow happens.
     let files = Files::new(&config.state_dir);
@@ -102,16 +116,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         config.generate.clusters,
         config.output.fade_s,
     );
-    let stage = Arc::new(Stage::from_scene(scene, THUMB_WIDTH)?);
-    tracing::info!(
-        "scene `{}` loaded: {} lights at {}x{} in {:.1} s",
-        stage.scene.name,
-        stage.scene.lights.len(),
-        stage.thumbs.width,
-        stage.thumbs.height,
-        started.elapsed().as_secs_f32()
-    );
-    let engine = Arc::new(Engine::new(&config, stage, output, input, session)?);
+    let loaded = stand_in.unwrap_or_else(|| Loaded::from_scene(scene));
+    if loaded.problem.is_none() {
+        keep_scene(&config);
+        let stage = &loaded.stage;
+        tracing::info!(
+            "scene `{}` loaded: {} lights at {}x{} in {:.1} s",
+            stage.scene.name,
+            stage.scene.lights.len(),
+            stage.thumbs.width,
+            stage.thumbs.height,
+            started.elapsed().as_secs_f32()
+        );
+    }
+    let engine = Arc::new(Engine::new(config.clone(), loaded, output, input, session)?);
 
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
@@ -144,6 +162,46 @@ async fn watchdog(engine: Arc<Engine>, period: std::time::Duration) {
     }
 }
 
+/// `SIGHUP` (what `systemctl reload` sends): [`Engine::reload`], off the async threads.
+async fn reload_on_hangup(engine: Arc<Engine>) {
+    let Ok(mut hangup) = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::hangup())
+    else {
+        tracing::error!("cannot listen for SIGHUP: reload with /vo/reload instead");
+        return;
+    };
+    while hangup.recv().await.is_some() {
+        let engine = Arc::clone(&engine);
+        // The reload logs (and tells systemd) its outcome itself.
+        let _ = tokio::task::spawn_blocking(move || engine.reload()).await;
+    }
+}
+
+/// How often a scene that did not load (or left lights out) is looked at again.
+const RETRY_SCENE: std::time::Duration = std::time::Duration::from_secs(2);
+
+/// Loads a scene that did not load once its files change ([`Engine::retry_scene`]).
+async fn retry_scene(engine: Arc<Engine>) {
+    let mut tick = tokio::time::interval(RETRY_SCENE);
+    loop {
+        tick.tick().await;
+        let engine = Arc::clone(&engine);
+        let _ = tokio::task::spawn_blocking(move || engine.retry_scene()).await;
+    }
+}
+
+/// Applies each reloaded config's `[osc]` allow-list and peers to the OSC server.
+async fn follow_config(
+    mut changes: tokio::sync::watch::Receiver<Arc<Config>>,
+    rules: crate::osc::server::Rules,
+) {
+    while changes.changed().await.is_ok() {
+        let config = Arc::clone(&changes.borrow_and_update());
+        if let Err(e) = rules.set(&config.osc) {
+            tracing::error!("the OSC allow-list and peers were not reloaded: {e}");
+        }
+    }
+}
+
 async fn serve(
     config: &Config,
     engine: &Arc<Engine>,
@@ -157,17 +215,8 @@ async fn serve(
         engine.set_pusher(sender);
     }
     let http = if let Some(listener) = web {
-        let http = Http::start(
-            listener,
-            config.allow_list(),
-            crate::http::Access {
-                password: (!config.http.password.is_empty()).then(|| config.http.password.clone()),
-                hosts: config.http.hosts.clone(),
-            },
-            Arc::clone(engine),
-            runner.clone(),
-        )
-        .map_err(anyhow::Error::msg)?;
+        let http = Http::start(listener, Arc::clone(engine), runner.clone())
+            .map_err(anyhow::Error::msg)?;
         tracing::info!("web gallery on http://{}/", http.addr());
         Some(http)
     } else {
@@ -198,6 +247,12 @@ async fn serve(
     if let Some(period) = sd_notify::watchdog_enabled() {
         tasks.push(tokio::spawn(watchdog(Arc::clone(engine), period)));
     }
+    tasks.push(tokio::spawn(reload_on_hangup(Arc::clone(engine))));
+    tasks.push(tokio::spawn(retry_scene(Arc::clone(engine))));
+    tasks.push(tokio::spawn(follow_config(
+        engine.config_changes(),
+        server.rules(),
+    )));
     let signalled = crate::shutdown::signalled().await;
     crate::shutdown::stop_intake(server, http, tasks).await;
     signalled

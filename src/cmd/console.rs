@@ -34,6 +34,7 @@ impl Cmd {
         // Read outside the session's lock: the input has its own.
         let (look, sources) = cx.engine.console_look()?;
         cx.commit(|s| {
+            s.fits(&look)?;
             s.set_base(look, Change::Grab);
             s.entry = None;
             let reply = match self {

@@ -127,7 +127,8 @@ impl Cmd {
     }
 
     pub fn apply(self, cx: &Context) -> Result<Vec<OscMessage>, Refusal> {
-        let scene = cx.scene();
+        let stage = cx.engine.stage();
+        let scene = &stage.scene;
         cx.commit(|s| {
             let reply = match self {
                 Cmd::GroupKey { name, on } => {
@@ -227,7 +228,7 @@ impl Cmd {
                             "there are already {MAX_PINS} pins: remove one with /vo/pin/<id>/remove"
                         )));
                     }
-                    let lights: Vec<usize> = (cx.engine.stage.footprints.select(region).iter())
+                    let lights: Vec<usize> = (cx.engine.stage().footprints.select(region).iter())
                         .enumerate()
                         .filter(|(_, on)| **on)
                         .map(|(l, _)| l)

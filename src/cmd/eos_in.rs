@@ -52,7 +52,8 @@ impl Cmd {
     }
 
     pub fn apply(self, cx: &Context) -> Result<Vec<OscMessage>, Refusal> {
-        let scene = cx.scene();
+        let stage = cx.engine.stage();
+        let scene = &stage.scene;
         match self {
             Cmd::EosOut(None) => Ok(Vec::new()),
             Cmd::EosOut(Some(ranges)) => {

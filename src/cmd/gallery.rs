@@ -64,7 +64,8 @@ impl Cmd {
     }
 
     pub fn apply(self, cx: &Context) -> Result<Vec<OscMessage>, Refusal> {
-        let scene = cx.scene();
+        let stage = cx.engine.stage();
+        let scene = &stage.scene;
         cx.commit(|s| match self {
             Cmd::Pick { k, m } => pick(s, k, m),
             Cmd::Step { forward } => {

@@ -57,7 +57,8 @@ impl Cmd {
     }
 
     pub fn apply(self, cx: &Context) -> Result<Vec<OscMessage>, Refusal> {
-        let scene = cx.scene();
+        let stage = cx.engine.stage();
+        let scene = &stage.scene;
         cx.commit(|s| {
             Ok(match self {
                 Cmd::Fader(target, value) => {

@@ -40,7 +40,8 @@ impl Cmd {
     }
 
     pub fn apply(self, cx: &Context) -> Result<Vec<OscMessage>, Refusal> {
-        let scene = cx.scene();
+        let stage = cx.engine.stage();
+        let scene = &stage.scene;
         match self {
             Cmd::Save { n, label } => {
                 let label = label.unwrap_or_else(|| format!("Look {n}"));

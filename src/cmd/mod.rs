@@ -21,6 +21,7 @@ mod generate;
 mod live;
 mod looks;
 mod objective;
+mod reload;
 mod runner;
 mod status;
 mod test_hook;
@@ -52,6 +53,7 @@ enum Command {
     Gallery(gallery::Cmd),
     Live(live::Cmd),
     Looks(looks::Cmd),
+    Reload(reload::Cmd),
     Status(status::Cmd),
     TestHook(test_hook::Cmd),
     Transfer(transfer::Cmd),
@@ -87,6 +89,9 @@ impl Command {
         if let Some(c) = looks::Cmd::parse(req)? {
             return Ok(Command::Looks(c));
         }
+        if let Some(c) = reload::Cmd::parse(req)? {
+            return Ok(Command::Reload(c));
+        }
         if let Some(c) = status::Cmd::parse(req)? {
             return Ok(Command::Status(c));
         }
@@ -114,6 +119,7 @@ impl Command {
             Command::Gallery(_) => "gallery",
             Command::Live(_) => "live",
             Command::Looks(_) => "looks",
+            Command::Reload(_) => "reload",
             Command::Status(_) => "status",
             Command::TestHook(_) => "test",
             Command::Transfer(_) => "transfer",
@@ -131,6 +137,7 @@ impl Command {
             Command::Gallery(c) => c.apply(cx),
             Command::Live(c) => c.apply(cx),
             Command::Looks(c) => c.apply(cx),
+            Command::Reload(c) => c.apply(cx),
             Command::Status(c) => c.apply(cx),
             Command::TestHook(c) => c.apply(cx),
             Command::Transfer(c) => c.apply(cx),
@@ -155,7 +162,8 @@ impl Command {
             }
             Command::Live(c) => !matches!(c, live::Cmd::Live),
             Command::Looks(c) => !matches!(c, looks::Cmd::List),
-            Command::Status(_) | Command::TestHook(_) => false,
+            // A reload changes this daemon's own files' view, not the mirrored session.
+            Command::Reload(_) | Command::Status(_) | Command::TestHook(_) => false,
         }
     }
 
@@ -187,10 +195,6 @@ pub struct Context<'a> {
 }
 
 impl Context<'_> {
-    fn scene(&self) -> &Scene {
-        &self.engine.stage.scene
-    }
-
     /// [`Engine::commit`], forwarding this command to the backups if the change is taken.
     fn commit(
         &self,

@@ -117,7 +117,8 @@ impl Cmd {
             Cmd::Add { image, aspects } => return add(cx, &image, aspects),
             Cmd::Edit(edit) => edit,
         };
-        let footprints = &e.stage.footprints;
+        let stage = e.stage();
+        let footprints = &stage.footprints;
         if let Edit::Region { id, region } = edit
             && e.exploring()
         {

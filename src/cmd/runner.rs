@@ -54,6 +54,10 @@ impl Runner {
         req: &Request,
         peer: &Peer,
     ) -> Result<Vec<OscMessage>, Refusal> {
+        // A daemon whose scene did not load answers queries and changes nothing.
+        if command.changes_state() {
+            self.engine.scene_loaded()?;
+        }
         let forward = command.forwarded().then(|| OscMessage {
             addr: req.path(),
             args: req.args.clone(),

@@ -54,11 +54,12 @@ impl Cmd {
     }
 
     pub fn apply(self, cx: &Context) -> Result<Vec<OscMessage>, Refusal> {
-        let scene = cx.scene();
+        let stage = cx.engine.stage();
+        let scene = &stage.scene;
         cx.commit(|s| {
             let from = s.gallery_look(self.entry, 1)?;
             let lights = match &self.part {
-                Part::Region(r) => cx.engine.stage.footprints.select(*r),
+                Part::Region(r) => stage.footprints.select(*r),
                 Part::Group(name) => {
                     let g = group(scene, name)?;
                     let mut on = vec![false; scene.lights.len()];

@@ -96,7 +96,7 @@ impl Engine {
             )));
         }
         let s = self.session();
-        let state = handover::state_json(&self.stage.scene, &s).map_err(Refusal::internal)?;
+        let state = handover::state_json(&self.stage().scene, &s).map_err(Refusal::internal)?;
         let state = msg("/vo/backup/state", state.map(OscType::String).into());
         if !backup.send(&[state]) {
             return Err(Refusal::internal(
@@ -119,7 +119,7 @@ impl Engine {
     pub fn install_state(&self, parts: &[String; 4]) -> Result<(), Refusal> {
         let _in_order = self.looks_io.lock().unwrap_or_else(|p| p.into_inner());
         let (count, clusters, fade_s) = self.backups.defaults;
-        let scene = &self.stage.scene;
+        let scene = &self.stage().scene;
         let fresh = Session::new(scene, count, clusters, fade_s);
         let (mut taken, lost) =
             handover::from_state(scene, parts, fresh).map_err(Refusal::input)?;
@@ -140,7 +140,7 @@ impl Engine {
     /// at the same point of the command order as the main installed it.
     pub fn take_gallery(&self, text: &str) -> Result<(), Refusal> {
         let gallery =
-            handover::gallery_from_json(&self.stage.scene, text).map_err(Refusal::input)?;
+            handover::gallery_from_json(&self.stage().scene, text).map_err(Refusal::input)?;
         let gallery = self.received_gallery(gallery);
         self.install_gallery(self.session(), gallery, Vec::new());
         Ok(())
@@ -155,7 +155,7 @@ impl Engine {
             .iter()
             .filter_map(|members| g.generation.candidates.get(*members.first()?))
             .collect();
-        g.generation.thumbnails = self.stage.thumbnails(&reps).into();
+        g.generation.thumbnails = self.stage().thumbnails(&reps).into();
         g.serial = self.next_serial();
         g
     }

@@ -8,20 +8,17 @@ use super::session::Change;
 use super::{Engine, Outcome, Refusal};
 use visobjd_dmx::input::SourceInfo;
 use visobjd_dmx::{Input, Patch};
-use visobjd_scene::Scene;
 use visobjd_scene::look::Look;
 
-/// The input, while it runs, and the patch its DMX is read through.
+/// The input, while it runs (its DMX is read through the running scene's patch).
 pub(super) struct ConsoleInput {
     input: Mutex<Option<Input>>,
-    patch: Patch,
 }
 
 impl ConsoleInput {
-    pub(super) fn new(scene: &Scene, input: Option<Input>) -> ConsoleInput {
+    pub(super) fn new(input: Option<Input>) -> ConsoleInput {
         ConsoleInput {
             input: Mutex::new(input),
-            patch: Patch::new(scene),
         }
     }
 
@@ -54,7 +51,7 @@ impl Engine {
     /// The merged console output read back through the patch as a look, with how many
     /// sources made it; refused when there is no input or no source counts yet.
     pub fn console_look(&self) -> Result<(Look, usize), Refusal> {
-        let patch = &self.console.patch;
+        let patch = Patch::new(&self.stage().scene);
         let read = self.console.with_input(|input| {
             let console = input.console(patch.universes());
             if console.sources == 0 {
@@ -87,6 +84,7 @@ impl Engine {
                 continue;
             };
             let followed = self.commit(None, |s| {
+                s.fits(&look)?;
                 if !s.following || s.base == look {
                     return Ok(Outcome::replies(Vec::new()));
                 }

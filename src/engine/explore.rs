@@ -187,6 +187,10 @@ impl Engine {
             };
             let reply = generated(&generation, ms, seed);
             let s = self.session();
+            if !inputs.current(&self) {
+                tracing::info!("explore: {}", super::generate::RELOADED);
+                continue;
+            }
             if self.has_backups() {
                 self.explore.unforwarded().get_or_insert_default().gallery =
                     Some((generation.clone(), seed));
@@ -271,9 +275,10 @@ impl Engine {
         }
         drop(unforwarded);
         if !regions.is_empty() {
-            self.writer.save(super::Snapshot::of(&self.stage.scene, &s));
+            self.writer
+                .save(super::Snapshot::of(&self.stage().scene, &s));
         }
-        Some((Inputs::of(&self.stage, &s), self.next_serial()))
+        Some((Inputs::of(self.stage(), &s), self.next_serial()))
     }
 
     /// The messages that bring a backup to the latest explore gallery, once: the regions
@@ -296,7 +301,7 @@ impl Engine {
             })
             .collect();
         if let Some((generation, seed)) = u.gallery {
-            match handover::gallery_json(&self.stage.scene, &generation, seed) {
+            match handover::gallery_json(&self.stage().scene, &generation, seed) {
                 Ok(text) => out.push(msg("/vo/backup/gallery", vec![OscType::String(text)])),
                 Err(e) => tracing::error!(
                     "explore: {e}; the backups may differ from this main until they re-sync"

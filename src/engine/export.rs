@@ -9,18 +9,15 @@ impl Engine {
     /// Pushes the live look to the configured Eos console and records it as preset `n`; the
     /// answer (`/vo/eos/preset n lights`, or why it could not be sent) goes to `answer`.
     pub fn eos_preset(&self, n: u32, answer: Later) -> Result<(), Refusal> {
-        let to = self
-            .eos
-            .target()
-            .map_err(Refusal::conflict)?
-            .ok_or_else(|| {
-                Refusal::conflict(
-                    "no Eos console is configured: set [eos] address (and protocol) in the config",
-                )
-            })?;
-        let commands = crate::eos::preset_commands(&self.stage.scene, &self.session().live, n);
-        let lights = self.stage.scene.lights.len();
-        let config = self.eos.clone();
+        let config = self.config().eos.clone();
+        let to = config.target().map_err(Refusal::conflict)?.ok_or_else(|| {
+            Refusal::conflict(
+                "no Eos console is configured: set [eos] address (and protocol) in the config",
+            )
+        })?;
+        let stage = self.stage();
+        let commands = crate::eos::preset_commands(&stage.scene, &self.session().live, n);
+        let lights = stage.scene.lights.len();
         self.threads
             .spawn("eos", move || {
                 answer(match crate::eos::push(&config, to, &commands) {

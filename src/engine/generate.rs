@@ -12,7 +12,6 @@ use rosc::{OscMessage, OscType};
 
 use super::session::{Gallery, Session};
 use super::{Engine, Later, Refusal, handover, msg};
-use crate::config::Config;
 use visobjd_method::gallery::Generation;
 use visobjd_method::objective::Objective;
 use visobjd_method::sampler::{Constraints, Spread};
@@ -23,31 +22,21 @@ use visobjd_scene::look::Look;
 pub(super) const NO_OBJECTIVES: &str =
     "there are no objectives: add one with /vo/objective/add first";
 
-/// What generates share: the one-at-a-time flag, the serial counter, the spread.
+/// What generates share: the one-at-a-time flag, the serial counter.
+#[derive(Default)]
 pub(super) struct Generator {
     /// A generate (or an explore gallery) is being drawn.
     pub(super) generating: AtomicBool,
     /// Galleries made in this run (the serial of the next one, minus one).
     made: AtomicU64,
-    spread: Spread,
-}
-
-impl Generator {
-    pub(super) fn new(config: &Config) -> Generator {
-        Generator {
-            generating: AtomicBool::new(false),
-            made: AtomicU64::new(0),
-            spread: Spread {
-                key: config.generate.sigma_key,
-                fill: config.generate.sigma_fill,
-            },
-        }
-    }
 }
 
 /// What a generate draws from, copied out of the session so it runs with the session
 /// unlocked.
 pub(super) struct Inputs {
+    /// The stage it draws on: a reload meanwhile makes its gallery stale (see
+    /// [`Inputs::current`]).
+    pub(super) stage: Arc<Stage>,
     objectives: Vec<Objective>,
     constraints: Constraints,
     base: Look,
@@ -56,16 +45,28 @@ pub(super) struct Inputs {
 }
 
 impl Inputs {
-    pub(super) fn of(stage: &Stage, s: &Session) -> Inputs {
+    pub(super) fn of(stage: Arc<Stage>, s: &Session) -> Inputs {
         Inputs {
-            objectives: s.objectives.iter().map(|e| e.objective.clone()).collect(),
             constraints: s.constraints(&stage.scene, false),
+            stage,
+            objectives: s.objectives.iter().map(|e| e.objective.clone()).collect(),
             base: s.base.clone(),
             count: s.count as usize,
             clusters: s.clusters as usize,
         }
     }
 }
+
+impl Inputs {
+    /// Whether `engine` still runs the stage these inputs were drawn on (no reload since).
+    pub(super) fn current(&self, engine: &Engine) -> bool {
+        Arc::ptr_eq(&self.stage, &engine.stage())
+    }
+}
+
+/// Why a gallery drawn before a reload is not installed.
+pub(super) const RELOADED: &str =
+    "the scene was reloaded while the gallery was drawn; the gallery is unchanged, generate again";
 
 /// Clears the "generating" flag when dropped, so a generate that panics never blocks the
 /// next one.
@@ -110,7 +111,7 @@ impl Engine {
             generating.store(false, Ordering::SeqCst);
             return Err(Refusal::conflict(NO_OBJECTIVES));
         }
-        let inputs = Inputs::of(&self.stage, &s);
+        let inputs = Inputs::of(self.stage(), &s);
         // Seeds travel as OSC int32: a random one stays in 1..=i32::MAX so it can be replayed.
         let seed = seed.unwrap_or_else(|| s.next_seed());
         let serial = self.next_serial();
@@ -143,9 +144,15 @@ impl Engine {
             };
             let reply = generated(&generation, ms, seed);
             let s = engine.session();
+            if !inputs.current(&engine) {
+                drop((s, running));
+                engine.generate_ended();
+                answer(Err(Refusal::conflict(RELOADED)));
+                return;
+            }
             // Under the lock: the backups install it between the same two commands.
             engine.forward_with(|| {
-                let text = handover::gallery_json(&engine.stage.scene, &generation, seed)?;
+                let text = handover::gallery_json(&inputs.stage.scene, &generation, seed)?;
                 Ok(msg("/vo/backup/gallery", vec![OscType::String(text)]))
             });
             drop(running);
@@ -206,17 +213,23 @@ impl Engine {
         progress: impl FnMut(f32) + Send,
     ) -> Option<(Generation, f32)> {
         let started = Instant::now();
+        let config = self.config();
+        let spread = Spread {
+            key: config.generate.sigma_key,
+            fill: config.generate.sigma_fill,
+        };
+        let stage = &inputs.stage;
         let drawn = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
             self.hooks.maybe_panic_generate();
             // `scope` runs its body on a pool thread: the sampling and clustering between
             // the parallel parts are niced too, not run on this thread.
             rayon::scope(|_| {
-                self.stage.generate_with_progress(
+                stage.generate_with_progress(
                     &GenerateRequest {
                         objectives: &inputs.objectives,
                         constraints: &inputs.constraints,
                         base: &inputs.base,
-                        spread: self.generator.spread,
+                        spread,
                         count: inputs.count,
                         clusters: inputs.clusters,
                     },

@@ -16,7 +16,8 @@
 //! By concern, one file each: this one (the state, `commit`, `change_looks`, shutdown);
 //! `session` and `rules` (the state itself, plain data); `outcome` (what a change asks
 //! for); `refusal` (why one was refused); `generate` and `explore` (galleries);
-//! `references` (the reference images); `view` (what tablets are shown); `pushes`
+//! `references` (the reference images); `reload` (the running config and scene, swapped
+//! whole by a reload); `view` (what tablets are shown); `pushes`
 //! (subscribers and the web page's event stream); `backups` and `handover` (a main's
 //! replication); `console` (the console's sACN); `export` (to Eos); `persist` and `writer`
 //! (the state folder); `threads`; `test_hooks`.
@@ -32,6 +33,7 @@ pub mod persist;
 mod pushes;
 mod references;
 mod refusal;
+mod reload;
 pub mod rules;
 pub mod session;
 mod test_hooks;
@@ -43,12 +45,13 @@ pub use outcome::Outcome;
 pub use pushes::Pusher;
 pub use references::resolve_reference;
 pub use refusal::{Refusal, RefusalKind};
+pub use reload::{Loaded, keep_scene};
 pub use test_hooks::{TEST_HOOKS, TestHook};
 pub use view::gallery_sizes;
 
 use std::collections::BTreeMap;
 use std::net::SocketAddr;
-use std::sync::{Arc, Mutex, MutexGuard};
+use std::sync::{Arc, Mutex, MutexGuard, RwLock};
 
 use rosc::{OscMessage, OscType};
 
@@ -58,7 +61,6 @@ use persist::{Files, Snapshot};
 use session::Session;
 use threads::Threads;
 use visobjd_dmx::{Input, Output, OutputStats};
-use visobjd_method::stage::Stage;
 use visobjd_scene::look::LookFile;
 use writer::Writer;
 
@@ -79,8 +81,13 @@ pub trait Follower: Send + Sync + 'static {
 
 /// The daemon's state and everything it drives.
 pub struct Engine {
-    /// The loaded scene.
-    pub stage: Arc<Stage>,
+    /// The running scene (see [`Engine::stage`]).
+    loaded: RwLock<Loaded>,
+    /// The running config: a reload replaces it, and the transports follow it
+    /// ([`Engine::config_changes`]).
+    config: tokio::sync::watch::Sender<Arc<Config>>,
+    /// Held by a reload, so two never interleave.
+    reloading: Mutex<()>,
     session: Mutex<Session>,
     output: Mutex<Option<Output>>,
     files: Files,
@@ -97,33 +104,31 @@ pub struct Engine {
     pushes: pushes::Pushes,
     backups: backups::Backups,
     console: console::ConsoleInput,
-    eos: crate::eos::EosConfig,
     hooks: test_hooks::Hooks,
 }
 
 impl Engine {
-    /// An engine over a loaded stage, restored from `state_dir`, driving `output` and
-    /// reading the console through `input`.
+    /// An engine over `loaded` (the scene, or what stands in for one that did not load),
+    /// restored from `state_dir`, driving `output` and reading the console through `input`.
     pub fn new(
-        config: &Config,
-        stage: Arc<Stage>,
+        config: Config,
+        loaded: Loaded,
         output: Output,
         input: Option<Input>,
         mut session: Session,
     ) -> std::io::Result<Engine> {
         let files = Files::new(&config.state_dir);
-        files.restore(&stage.scene, &mut session);
+        files.restore(&loaded.stage.scene, &mut session);
         output.set_master(session.master);
         output.set_blackout(session.blackout);
         output.set_look(session.live.clone(), 0.0);
         Ok(Engine {
-            references: references::References::new(config),
-            generator: generate::Generator::new(config),
+            references: references::References::default(),
+            generator: generate::Generator::default(),
             explore: explore::Explore::default(),
             pushes: pushes::Pushes::default(),
-            backups: backups::Backups::new(config),
-            console: console::ConsoleInput::new(&stage.scene, input),
-            eos: config.eos.clone(),
+            backups: backups::Backups::new(&config),
+            console: console::ConsoleInput::new(input),
             hooks: test_hooks::Hooks::from_env(),
             output: Mutex::new(Some(output)),
             session: Mutex::new(session),
@@ -131,7 +136,9 @@ impl Engine {
             files,
             looks_io: Mutex::new(()),
             threads: Threads::default(),
-            stage,
+            loaded: RwLock::new(loaded),
+            config: tokio::sync::watch::Sender::new(Arc::new(config)),
+            reloading: Mutex::new(()),
         })
     }
 
@@ -183,7 +190,7 @@ impl Engine {
             pushes.extend(self.feedback(&s));
         }
         let ticket = (outcome.persist != Persist::No)
-            .then(|| self.writer.save(Snapshot::of(&self.stage.scene, &s)));
+            .then(|| self.writer.save(Snapshot::of(&self.stage().scene, &s)));
         self.publish(s, &pushes);
         if let Some(ticket) = ticket.filter(|_| outcome.persist == Persist::Now) {
             self.writer.wait(ticket).map_err(|e| {

@@ -6,31 +6,20 @@ use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
 use super::{Engine, Refusal};
-use crate::config::Config;
 use visobjd_method::objective::{self, Aspects, Objective, Region};
 
 /// Largest name of an uploaded reference image.
 const MAX_REFERENCE_NAME: usize = 100;
 
-/// The folder and what reading from it needs.
+/// What reading from the folder (named by the config, which a reload may change) needs.
+#[derive(Default)]
 pub(super) struct References {
-    folder: PathBuf,
-    /// Colours of a reference's palette.
-    palette_size: usize,
     /// Held while a reference is decoded: one at a time, so many senders adding
     /// 64-megapixel images at once cannot multiply the ~200 MB each decode takes.
     reading: Mutex<()>,
 }
 
 impl References {
-    pub(super) fn new(config: &Config) -> References {
-        References {
-            folder: config.references.clone(),
-            palette_size: config.generate.palette as usize,
-            reading: Mutex::new(()),
-        }
-    }
-
     fn one_at_a_time(&self) -> std::sync::MutexGuard<'_, ()> {
         self.reading.lock().unwrap_or_else(|p| p.into_inner())
     }
@@ -38,14 +27,14 @@ impl References {
 
 impl Engine {
     /// The references folder (objective images are read from it, and only from it).
-    pub fn references(&self) -> &Path {
-        &self.references.folder
+    pub fn references(&self) -> PathBuf {
+        self.config().references.clone()
     }
 
     /// The image files (PNG, JPEG by their extension) in the references folder, sorted.
     pub fn reference_names(&self) -> Result<Vec<String>, Refusal> {
         let folder = self.references();
-        let dir = std::fs::read_dir(folder).map_err(|e| {
+        let dir = std::fs::read_dir(&folder).map_err(|e| {
             Refusal::internal(format!(
                 "the references folder {} is not readable: {e}",
                 folder.display()
@@ -113,7 +102,7 @@ impl Engine {
     /// handling thread with the session unlocked, so a slow decode holds up only that
     /// sender, whose later messages then see the objective.
     pub fn read_objective(&self, name: &str, aspects: Aspects) -> Result<Objective, Refusal> {
-        let path = resolve_reference(self.references(), name)?;
+        let path = resolve_reference(&self.references(), name)?;
         let img = self
             .decode_reference(&path)
             .map_err(|e| Refusal::input(format!("{name} {e}")))?;
@@ -121,7 +110,11 @@ impl Engine {
             image: name.to_string(),
             aspects,
             region: Region::FULL,
-            analysis: objective::analyze(&img, Region::FULL, self.references.palette_size),
+            analysis: objective::analyze(
+                &img,
+                Region::FULL,
+                self.config().generate.palette as usize,
+            ),
         })
     }
 

@@ -181,6 +181,18 @@ impl Session {
         c
     }
 
+    /// Refuses a look read for another rig: one made from the scene before a reload that
+    /// came between reading it and this change.
+    pub fn fits(&self, look: &Look) -> Result<(), Refusal> {
+        if look.levels.len() == self.live.levels.len() {
+            Ok(())
+        } else {
+            Err(Refusal::conflict(
+                "the scene was reloaded meanwhile: its lights changed; try again",
+            ))
+        }
+    }
+
     /// Makes `look` both base and live, remembering the old base for undo. A look that is
     /// not the console's (a pick, recall, fader) ends following the console.
     pub fn set_base(&mut self, look: Look, change: Change) {

@@ -20,9 +20,10 @@ impl Engine {
             .as_ref()
             .map_or((0, 0), |g| (g.generation.candidates.len(), g.len()));
         let health = self.output_stats();
+        let stage = self.stage();
         let mut args = vec![
-            OscType::String(self.stage.scene.name.clone()),
-            OscType::Int(self.stage.scene.lights.len() as i32),
+            OscType::String(stage.scene.name.clone()),
+            OscType::Int(stage.scene.lights.len() as i32),
             OscType::Int(s.objectives.len() as i32),
             OscType::Int(candidates as i32),
             OscType::Int(clusters as i32),
@@ -52,6 +53,18 @@ impl Engine {
                     OscType::String(universe_list(&src.universes)),
                     OscType::Float(src.age.as_secs_f32()),
                 ]);
+            }
+        }
+        if let Some(problem) = self.scene_problem() {
+            args.push(OscType::String("problem".into()));
+            args.push(OscType::String(problem));
+        }
+        if !stage.unseen.is_empty() {
+            args.push(OscType::String("unseen".into()));
+            args.push(OscType::Int(stage.unseen.len() as i32));
+            for u in &stage.unseen {
+                args.push(OscType::Int(stage.scene.lights[u.light].channel as i32));
+                args.push(OscType::String(u.error.to_string()));
             }
         }
         msg("/vo/status", args)
@@ -86,6 +99,16 @@ impl Engine {
     /// gallery is, what is running.
     pub fn status_text(&self, s: &Session) -> String {
         let mut parts = Vec::new();
+        if let Some(problem) = self.scene_problem() {
+            parts.push(problem);
+        }
+        let stage = self.stage();
+        if !stage.unseen.is_empty() {
+            parts.push(format!(
+                "left out (no basis image): {}",
+                super::reload::unseen_list(&stage)
+            ));
+        }
         if s.blackout {
             parts.push("BLACKOUT".to_string());
         }

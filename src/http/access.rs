@@ -15,20 +15,32 @@ use axum::response::Response;
 use base64::Engine as _;
 
 use super::{Client, Shared, refuse};
+use crate::config::Config;
 
 /// Who may reach the page besides the allow-list (`[http]`, docs/web.md).
 #[derive(Debug, Clone, Default)]
-pub struct Access {
+pub(super) struct Access {
     /// The password (HTTP Basic, any user name); `None`: none asked.
     pub password: Option<String>,
     /// Host names besides addresses and `localhost` the page may be opened by.
     pub hosts: Vec<String>,
 }
 
+impl Access {
+    /// The `[http]` settings of `config` (read on every request: a reload applies at once).
+    pub(super) fn of(config: &Config) -> Access {
+        Access {
+            password: (!config.http.password.is_empty()).then(|| config.http.password.clone()),
+            hosts: config.http.hosts.clone(),
+        }
+    }
+}
+
 /// The access rules every request passes (module header), and headers every answer gets:
 /// nothing cached, nothing sniffed, never framed by another page.
 pub(super) async fn guard(State(sh): State<Arc<Shared>>, req: Request, next: Next) -> Response {
-    if let Err(refusal) = admit(&sh.access, req.method(), req.headers()) {
+    let access = Access::of(&sh.engine.config());
+    if let Err(refusal) = admit(&access, req.method(), req.headers()) {
         let from = req.extensions().get::<Client>().map(|c| c.0);
         tracing::info!(
             "http: {} {} from {from:?} refused: {}",

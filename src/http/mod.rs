@@ -19,8 +19,6 @@ mod pictures;
 mod upload;
 mod view;
 
-pub use access::Access;
-
 use std::net::SocketAddr;
 use std::sync::Arc;
 use std::time::Duration;
@@ -36,7 +34,7 @@ use tokio::net::TcpListener;
 use tokio::sync::Semaphore;
 
 use crate::cmd::Runner;
-use crate::config::{Cidr, permits};
+use crate::config::permits;
 use crate::engine::{Engine, RefusalKind};
 
 /// Largest request head (request line and headers); hyper answers 431 beyond it.
@@ -70,8 +68,6 @@ impl Http {
     /// `engine`, changes through `runner`.
     pub fn start(
         listener: std::net::TcpListener,
-        allow: Vec<Cidr>,
-        access: Access,
         engine: Arc<Engine>,
         runner: Runner,
     ) -> Result<Http, String> {
@@ -81,12 +77,11 @@ impl Http {
         let listener =
             TcpListener::from_std(listener).map_err(|e| format!("http.listen {addr}: {e}"))?;
         let shared = Arc::new(Shared {
-            engine,
+            engine: Arc::clone(&engine),
             runner,
-            access,
             pictures: pictures::Caches::default(),
         });
-        let accept = tokio::spawn(accept(listener, allow, router(shared)));
+        let accept = tokio::spawn(accept(listener, engine, router(shared)));
         Ok(Http { addr, accept })
     }
 
@@ -107,7 +102,6 @@ impl Http {
 struct Shared {
     engine: Arc<Engine>,
     runner: Runner,
-    access: Access,
     pictures: pictures::Caches,
 }
 
@@ -149,7 +143,8 @@ fn router(shared: Arc<Shared>) -> Router {
         .with_state(shared)
 }
 
-async fn accept(listener: TcpListener, allow: Vec<Cidr>, app: Router) {
+/// Takes connections from senders `osc.allow` permits (as the running config says now).
+async fn accept(listener: TcpListener, engine: Arc<Engine>, app: Router) {
     let slots = Arc::new(Semaphore::new(MAX_CONNECTIONS));
     loop {
         let (stream, from) = match listener.accept().await {
@@ -160,7 +155,7 @@ async fn accept(listener: TcpListener, allow: Vec<Cidr>, app: Router) {
                 continue;
             }
         };
-        if !permits(&allow, from.ip()) {
+        if !permits(&engine.config().allow_list(), from.ip()) {
             tracing::info!("http: refused {from}, not in osc.allow");
             continue;
         }

@@ -85,7 +85,7 @@ async fn render(sh: &Shared, look: Look) -> Response {
     let rendered = look.clone();
     let Some(pic) = blocking(move || {
         engine
-            .stage
+            .stage()
             .thumbnails(&[&rendered])
             .first()
             .map(encode_jpeg)
@@ -213,7 +213,7 @@ pub(super) async fn saved_look(
     };
     let look = {
         let s = sh.engine.session();
-        s.looks.get(&n).map(|f| f.to_look(&sh.engine.stage.scene))
+        s.looks.get(&n).map(|f| f.to_look(&sh.engine.stage().scene))
     };
     match look {
         Some(Ok(look)) => render(&sh, look).await,
@@ -243,7 +243,7 @@ pub(super) async fn selected(
     let Some(region) = region else {
         return refuse(StatusCode::NOT_FOUND, "no such objective");
     };
-    let chosen = sh.engine.stage.footprints.select(region);
+    let chosen = sh.engine.stage().footprints.select(region);
     let mut look = Look::off(chosen.len());
     for (level, on) in look.levels.iter_mut().zip(chosen) {
         if on {
@@ -282,7 +282,7 @@ pub(super) async fn reference_file(
 /// A reference image by name, checked and decoded as an objective's is, at most
 /// [`REFERENCE_WIDTH`] wide; cached while the file keeps its size and time.
 async fn reference_picture(sh: &Shared, name: String) -> Response {
-    let path = match crate::engine::resolve_reference(sh.engine.references(), &name) {
+    let path = match crate::engine::resolve_reference(&sh.engine.references(), &name) {
         Ok(p) => p,
         Err(e) => return refuse(StatusCode::NOT_FOUND, &e.sentence),
     };

@@ -32,13 +32,14 @@ pub(super) fn look_key(look: &Look) -> String {
 
 /// The whole page state: the session, the stage, the rig and its rules.
 fn state(e: &Engine) -> Value {
-    let scene = &e.stage.scene;
     let s = e.session();
+    let stage = e.stage();
+    let scene = &stage.scene;
     let (undo, redo, _) = s.history();
     let entry = s.entry.unwrap_or((0, 0));
     json!({
         "scene": scene.name,
-        "aspect": e.stage.thumbs.width as f32 / e.stage.thumbs.height.max(1) as f32,
+        "aspect": stage.thumbs.width as f32 / stage.thumbs.height.max(1) as f32,
         "status": e.status_text(&s),
         "output": output(e),
         "console": console(e),
@@ -147,12 +148,13 @@ fn pins(scene: &Scene, s: &Session) -> Vec<Value> {
 
 /// Every objective: its image, aspects, region, palette and the channels its region selects.
 fn objectives(e: &Engine, s: &Session) -> Vec<Value> {
-    let scene = &e.stage.scene;
+    let stage = e.stage();
+    let scene = &stage.scene;
     s.objectives
         .iter()
         .map(|o| {
             let r = o.objective.region;
-            let chosen = e.stage.footprints.select(r);
+            let chosen = stage.footprints.select(r);
             json!({
                 "id": o.id,
                 "image": o.objective.image,

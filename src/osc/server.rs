@@ -172,9 +172,9 @@ impl Sender {
     /// a full socket buffer).
     pub fn send(&self, to: SocketAddr, msg: &OscMessage) -> Result<(), String> {
         if let Some(shared) = self.shared.upgrade()
-            && let Some(route) = shared.routes.tcp(to.ip())
+            && let Some(route) = shared.rules.now().routes.tcp(to.ip()).cloned()
         {
-            return shared.send_tcp(route, msg);
+            return shared.send_tcp(&route, msg);
         }
         let bytes = encode_datagram(msg)?;
         self.socket
@@ -274,21 +274,55 @@ pub struct Server {
 pub struct Listeners {
     udp: Option<std::net::UdpSocket>,
     tcp: Option<std::net::TcpListener>,
-    allow: Vec<Cidr>,
-    routes: Routes,
+    allowed: Allowed,
     reply_port: u16,
 }
 
-impl Listeners {
-    /// Checks `config` and binds its addresses ("" leaves one off). Errors name the config
-    /// key and address: "osc.udp 127.0.0.1:8000: address already in use".
-    pub fn bind(config: &OscConfig) -> Result<Listeners, String> {
+/// Who may send (`osc.allow`) and where peers' replies go (`[[osc.peer]]`), checked
+/// together and replaced whole.
+struct Allowed {
+    allow: Vec<Cidr>,
+    routes: Routes,
+}
+
+impl Allowed {
+    fn of(config: &OscConfig) -> Result<Allowed, String> {
         let allow = config
             .allow
             .iter()
             .map(|a| Cidr::parse(a).map_err(|e| format!("osc.allow: {e}")))
             .collect::<Result<Vec<_>, _>>()?;
         crate::config::validate_peers(&config.peer, &allow)?;
+        Ok(Allowed {
+            allow,
+            routes: Routes::new(&config.peer),
+        })
+    }
+}
+
+/// The serving server's allow-list and peers, which a reload replaces ([`Server::rules`]).
+/// Connections already open stay; new packets are checked against the new list.
+#[derive(Clone)]
+pub struct Rules(Arc<std::sync::RwLock<Arc<Allowed>>>);
+
+impl Rules {
+    /// Replaces the allow-list and peers with `config`'s; an invalid one changes nothing.
+    pub fn set(&self, config: &OscConfig) -> Result<(), String> {
+        let allowed = Arc::new(Allowed::of(config)?);
+        *self.0.write().unwrap_or_else(|p| p.into_inner()) = allowed;
+        Ok(())
+    }
+
+    fn now(&self) -> Arc<Allowed> {
+        Arc::clone(&self.0.read().unwrap_or_else(|p| p.into_inner()))
+    }
+}
+
+impl Listeners {
+    /// Checks `config` and binds its addresses ("" leaves one off). Errors name the config
+    /// key and address: "osc.udp 127.0.0.1:8000: address already in use".
+    pub fn bind(config: &OscConfig) -> Result<Listeners, String> {
+        let allowed = Allowed::of(config)?;
         let udp = listen_addr("osc.udp", &config.udp)?
             .map(|addr| bind_udp(addr).map_err(|e| format!("osc.udp {addr}: {}", plain(&e))))
             .transpose()?;
@@ -302,8 +336,7 @@ impl Listeners {
         Ok(Listeners {
             udp,
             tcp,
-            allow,
-            routes: Routes::new(&config.peer),
+            allowed,
             reply_port: config.reply_port,
         })
     }
@@ -336,14 +369,12 @@ impl Server {
         let Listeners {
             udp,
             tcp,
-            allow,
-            routes,
+            allowed,
             reply_port,
         } = listeners;
         let shared = Arc::new(Shared {
             handler,
-            allow,
-            routes,
+            rules: Rules(Arc::new(std::sync::RwLock::new(Arc::new(allowed)))),
             runtime: Handle::current(),
             reply_port,
             limits,
@@ -403,6 +434,11 @@ impl Server {
         self.tcp_addr
     }
 
+    /// A handle on the allow-list and peers, for a reload.
+    pub fn rules(&self) -> Rules {
+        self.shared.rules.clone()
+    }
+
     /// A handle for pushing OSC from the UDP socket, if UDP is on.
     pub fn sender(&self) -> Option<Sender> {
         self.sender.clone()
@@ -446,9 +482,7 @@ impl Drop for Server {
 /// State every listener task shares.
 struct Shared {
     handler: Arc<dyn Handler>,
-    allow: Vec<Cidr>,
-    /// `[[osc.peer]]`.
-    routes: Routes,
+    rules: Rules,
     runtime: Handle,
     reply_port: u16,
     limits: Limits,
@@ -465,7 +499,7 @@ struct Shared {
 impl Shared {
     /// The allow-list check, done before anything from the sender is decoded.
     fn permits(&self, from: SocketAddr) -> bool {
-        let ok = crate::config::permits(&self.allow, from.ip());
+        let ok = crate::config::permits(&self.rules.now().allow, from.ip());
         if !ok {
             self.refused.fetch_add(1, Ordering::Relaxed);
             if let Some(n) = throttled(&self.refused_log) {
@@ -478,7 +512,7 @@ impl Shared {
     /// Where UDP replies and pushes to `from` go: its `[[osc.peer]]` port, else the
     /// global rule.
     fn reply_addr(&self, from: SocketAddr) -> SocketAddr {
-        if let Some(to) = self.routes.reply_addr(from) {
+        if let Some(to) = self.rules.now().routes.reply_addr(from) {
             return to;
         }
         match self.reply_port {
@@ -718,6 +752,8 @@ async fn serve_sender(from: SocketAddr, backlogs: Backlogs, sender: Sender, shar
         let socket = sender.socket.clone();
         let handled = tokio::task::spawn_blocking(move || {
             let to_tcp = handler_shared
+                .rules
+                .now()
                 .routes
                 .tcp(handler_peer.reply_addr.ip())
                 .cloned();
@@ -825,7 +861,7 @@ async fn connection(
     let _ = stream.set_nodelay(true);
     let (mut rd, mut wr) = stream.into_split();
     let limits = shared.limits;
-    let route = shared.routes.tcp(from.ip()).cloned();
+    let route = shared.rules.now().routes.tcp(from.ip()).cloned();
     let mut link = framing.map(|f| queue.link(f));
     if let (Some(route), Some(link)) = (&route, &link) {
         route.attach(link);

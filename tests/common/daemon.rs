@@ -276,13 +276,42 @@ pub struct Health {
     pub destinations: Vec<(String, i32)>,
 }
 
+/// The words that start `/vo/status`'s tagged parts after the destinations (no
+/// destination label is one word).
+const STATUS_PARTS: [&str; 3] = ["console", "problem", "unseen"];
+
+/// The arguments of `/vo/status`'s part `tag` (`console`, `problem`, `unseen`) up to the
+/// next part, if it has one.
+pub fn status_part<'a>(m: &'a OscMessage, tag: &str) -> Option<&'a [OscType]> {
+    let is_part = |a: &OscType| {
+        STATUS_PARTS
+            .iter()
+            .any(|p| *a == OscType::String((*p).into()))
+    };
+    let start = m
+        .args
+        .iter()
+        .position(|a| *a == OscType::String(tag.into()))?
+        + 1;
+    let len = m.args[start..]
+        .iter()
+        .position(is_part)
+        .unwrap_or(m.args.len() - start);
+    Some(&m.args[start..start + len])
+}
+
 impl Health {
     pub fn parse(m: &OscMessage) -> Health {
-        // The console part (with `[input.sacn]`) starts at the word `console`.
+        // The tagged parts (the console with `[input.sacn]`, a scene's problems) start at
+        // their words.
         let end = m
             .args
             .iter()
-            .position(|a| *a == OscType::String("console".into()))
+            .position(|a| {
+                STATUS_PARTS
+                    .iter()
+                    .any(|p| *a == OscType::String((*p).into()))
+            })
             .unwrap_or(m.args.len());
         let a = &m.args[..end];
         assert!(

@@ -24,6 +24,7 @@ mod daemon_live;
 mod daemon_looks;
 mod daemon_objectives;
 mod daemon_peers;
+mod daemon_reload;
 mod daemon_start;
 mod eos;
 mod osc_transport;

@@ -81,6 +81,23 @@ impl Stage {
         })
     }
 
+    /// A stage of `scene` whose images are all black (one pixel each): the patch without
+    /// pictures, for a daemon whose scene's images cannot be read, so that its saved look
+    /// still goes out through the patch.
+    pub fn blank(scene: Scene) -> Stage {
+        let lights = scene.lights.len();
+        let black = |p| BasisImages::from_planes(1, 1, lights, &vec![0.0; 3 * lights], p);
+        Stage {
+            rig: LightGroups::new(&scene),
+            footprints: Footprints::new(&black(Precision::Single)),
+            gain: exposure_gain(scene.exposure),
+            proxy: black(Precision::Single),
+            thumbs: black(Precision::Half),
+            unseen: Vec::new(),
+            scene,
+        }
+    }
+
     /// Prepares an objective for this stage: the lights its region selects and their
     /// sensitivities there.
     pub fn target(&self, objective: &Objective) -> Target {

@@ -17,8 +17,8 @@ use rosc::{OscMessage, OscPacket, OscType};
 use super::Row;
 use crate::cmd::Runner;
 use crate::config::Config;
-use crate::engine::Engine;
 use crate::engine::session::Session;
+use crate::engine::{Engine, Loaded};
 use crate::osc::Server;
 use visobjd_dmx::{Output, Patch};
 use visobjd_method::stage::Stage;
@@ -221,7 +221,13 @@ pub fn run(stage: Arc<Stage>, scene: &Path, refs: &Path, seconds: f64) -> anyhow
         config.generate.clusters,
         config.output.fade_s,
     );
-    let engine = Arc::new(Engine::new(&config, stage, output, None, session)?);
+    let engine = Arc::new(Engine::new(
+        config.clone(),
+        Loaded::running(stage),
+        output,
+        None,
+        session,
+    )?);
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
