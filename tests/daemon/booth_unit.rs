@@ -220,8 +220,9 @@ impl Notify {
         self.dir.join("notify")
     }
 
-    /// Reads notifications until one has the line `want`; panics after [`PATIENCE`].
-    fn expect(&self, want: &str) {
+    /// Reads notifications until one has the line `want`, and returns that notification
+    /// (all its lines); panics after [`PATIENCE`].
+    fn expect(&self, want: &str) -> String {
         let end = Instant::now() + PATIENCE;
         let mut buf = [0u8; 4096];
         let mut got = Vec::new();
@@ -230,7 +231,7 @@ impl Notify {
                 Ok(n) => {
                     let text = String::from_utf8_lossy(&buf[..n]).into_owned();
                     if text.lines().any(|l| l == want) {
-                        return;
+                        return text;
                     }
                     got.push(text);
                 }
@@ -426,6 +427,29 @@ fn booth_session(name: &str, user: Option<u32>) {
     for proto in PROTOS {
         d.wire.wait_look(proto, &live);
     }
+    let reloaded_from = Instant::now();
+
+    // `systemctl reload` as the unit defines it, under the same filter and user.
+    let reload = directive(
+        &std::fs::read_to_string(UNIT).expect("read the unit"),
+        "ExecReload",
+    );
+    let reload = reload.last().expect("an ExecReload= line");
+    let reload = reload.replace("$MAINPID", &pid.to_string());
+    let mut words = reload.split_whitespace();
+    let ran = Command::new(words.next().expect("a command"))
+        .args(words)
+        .status()
+        .expect("ExecReload= runs");
+    assert!(ran.success(), "{reload}: {ran}");
+    notify.expect("RELOADING=1");
+    let ready = notify.expect("READY=1");
+    assert!(
+        ready.lines().any(|l| l.starts_with("STATUS=reloaded ")),
+        "{ready}"
+    );
+    d.wire
+        .assert_continuous_since(reloaded_from, "systemctl reload");
 
     // Still alive and on the wire at the end.
     assert!(
