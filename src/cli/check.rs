@@ -16,11 +16,66 @@ pub struct Args {
     config: PathBuf,
 }
 
+/// The `refs` line: how many images, and what would keep uploads from working.
+fn references(config: &Config) -> String {
+    let folder = &config.references;
+    let shipped = config.scene.join("refs");
+    let mut line = match crate::engine::reference_files(folder) {
+        Ok(names) if names.is_empty() => {
+            let stocked = crate::engine::reference_files(&shipped).is_ok_and(|n| !n.is_empty());
+            if stocked {
+                format!(
+                    "{} is empty: the daemon copies the scene's {} images there at start",
+                    folder.display(),
+                    shipped.display()
+                )
+            } else {
+                format!(
+                    "{} is empty: objectives need reference images there (copy some in, or upload them on the web page)",
+                    folder.display()
+                )
+            }
+        }
+        Ok(names) => format!("{} images in {}", names.len(), folder.display()),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            format!(
+                "{} does not exist yet: the daemon makes it at start",
+                folder.display()
+            )
+        }
+        Err(e) => format!("{} is not readable ({e})", folder.display()),
+    };
+    let probe = folder.join(".visobjd-check");
+    if folder.is_dir()
+        && let Err(e) = std::fs::write(&probe, b"").and_then(|()| std::fs::remove_file(&probe))
+    {
+        line += &format!("; not writable ({e}): uploads will fail");
+    }
+    if !folder.starts_with(&config.state_dir) {
+        line += "; outside state_dir: under the booth unit (ProtectSystem=strict) uploads fail \
+                 with \"Read-only file system\" (put it under state_dir)";
+    }
+    line
+}
+
 /// Runs `check`: the first problem found is the error; otherwise the summary.
 pub fn run(args: Args) -> anyhow::Result<()> {
     let config = Config::load(&args.config).map_err(anyhow::Error::msg)?;
     let stage = Stage::load(&config.scene, THUMB_WIDTH)?;
     let scene = &stage.scene;
+    if !stage.unseen.is_empty() {
+        let each: Vec<String> = stage
+            .unseen
+            .iter()
+            .map(|u| format!("  light {}: {}", scene.lights[u.light].channel, u.error))
+            .collect();
+        anyhow::bail!(
+            "{} of {} lights have a basis image that cannot be used (the daemon would leave them out of generation):\n{}",
+            stage.unseen.len(),
+            scene.lights.len(),
+            each.join("\n")
+        );
+    }
     let patch = Patch::new(scene);
     config
         .output
@@ -35,16 +90,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     for (l, light) in scene.lights.iter().enumerate() {
         *used.entry(light.universe).or_default() += scene.profile(l).footprint();
     }
-    let refs = std::fs::read_dir(&config.references)
-        .map(|d| {
-            d.filter_map(Result::ok)
-                .filter(|e| e.path().is_file())
-                .count()
-        })
-        .map_or_else(
-            |e| format!("{} is not readable ({e})", config.references.display()),
-            |n| format!("{n} files in {}", config.references.display()),
-        );
+    let refs = references(&config);
     let bytes = stage.proxy.bytes() + stage.thumbs.bytes();
     // Colour-mixing lights: previewed from their emitters' own images, or approximated
     // from their white image and their profile's colour model.

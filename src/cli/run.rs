@@ -16,7 +16,7 @@ use crate::cmd::Runner;
 use crate::config::Config;
 use crate::engine::persist::{Files, restore_live};
 use crate::engine::session::Session;
-use crate::engine::{Engine, Loaded, keep_scene};
+use crate::engine::{Engine, Loaded, keep_scene, stock_references};
 use crate::http::Http;
 use crate::osc::server::Listeners;
 use crate::osc::{Limits, Server};
@@ -109,6 +109,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .transpose()
         .map_err(|e| anyhow::anyhow!("{}: {e}", config.path.display()))?;
 
+    stock_references(&config);
     let started = std::time::Instant::now();
     let session = Session::new(
         &scene,

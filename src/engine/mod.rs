@@ -43,7 +43,7 @@ mod writer;
 
 pub use outcome::Outcome;
 pub use pushes::Pusher;
-pub use references::resolve_reference;
+pub use references::{reference_files, resolve_reference, stock_references};
 pub use refusal::{Refusal, RefusalKind};
 pub use reload::{Loaded, keep_scene};
 pub use test_hooks::{TEST_HOOKS, TestHook};

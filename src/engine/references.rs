@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
 use super::{Engine, Refusal};
+use crate::config::Config;
 use visobjd_method::objective::{self, Aspects, Objective, Region};
 
 /// Largest name of an uploaded reference image.
@@ -34,18 +35,12 @@ impl Engine {
     /// The image files (PNG, JPEG by their extension) in the references folder, sorted.
     pub fn reference_names(&self) -> Result<Vec<String>, Refusal> {
         let folder = self.references();
-        let dir = std::fs::read_dir(&folder).map_err(|e| {
+        reference_files(&folder).map_err(|e| {
             Refusal::internal(format!(
                 "the references folder {} is not readable: {e}",
                 folder.display()
             ))
-        })?;
-        let mut names: Vec<String> = dir
-            .filter_map(|e| e.ok()?.file_name().into_string().ok())
-            .filter(|n| reference_format(n).is_some() && !n.starts_with('.'))
-            .collect();
-        names.sort();
-        Ok(names)
+        })
     }
 
     /// Stores an uploaded reference image as `name` in the references folder, atomically,
@@ -155,6 +150,56 @@ pub fn resolve_reference(references: &Path, name: &str) -> Result<PathBuf, Refus
 }
 
 /// The image format a reference's file name promises, by its extension.
+/// The reference images (PNG, JPEG by extension, not hidden) in `folder`, sorted by name.
+pub fn reference_files(folder: &Path) -> std::io::Result<Vec<String>> {
+    let mut names: Vec<String> = std::fs::read_dir(folder)?
+        .filter_map(|e| e.ok()?.file_name().into_string().ok())
+        .filter(|n| reference_format(n).is_some() && !n.starts_with('.'))
+        .collect();
+    names.sort();
+    Ok(names)
+}
+
+/// Makes the references folder if it is missing and, while it holds no image, copies in the
+/// images the scene ships in its own `refs/` folder: a booth's library lives in writable
+/// state (the unit's file system is read-only elsewhere) and starts with what came with the
+/// scene. Never replaces a file. Failures cost only the copy, so they are logged.
+pub fn stock_references(config: &Config) {
+    let folder = &config.references;
+    let shipped = config.scene.join("refs");
+    if let Err(e) = std::fs::create_dir_all(folder) {
+        tracing::error!(
+            "references folder {}: cannot create it ({e}); uploads will fail",
+            folder.display()
+        );
+        return;
+    }
+    let empty = reference_files(folder).is_ok_and(|n| n.is_empty());
+    let same = folder.canonicalize().ok() == shipped.canonicalize().ok();
+    let Ok(names) = reference_files(&shipped) else {
+        return;
+    };
+    if !empty || same || names.is_empty() {
+        return;
+    }
+    let copied = names
+        .iter()
+        .filter(|n| {
+            std::fs::read(shipped.join(n))
+                .and_then(|bytes| visobjd_files::write_new_atomic(&folder.join(n), &bytes))
+                .inspect_err(|e| {
+                    tracing::warn!("reference {n} not copied to {}: {e}", folder.display())
+                })
+                .is_ok()
+        })
+        .count();
+    tracing::info!(
+        "references folder {} was empty: copied the scene's {copied} reference images from {}",
+        folder.display(),
+        shipped.display()
+    );
+}
+
 fn reference_format(name: &str) -> Option<image::ImageFormat> {
     let (_, ext) = name.rsplit_once('.')?;
     match ext.to_ascii_lowercase().as_str() {

@@ -395,6 +395,70 @@ fn check_summarises_a_clean_scene_and_refuses_a_broken_one() {
 }
 
 #[test]
+fn check_lists_every_unusable_basis_image() {
+    let dir = temp_dir("cli-check-images");
+    stripes(&dir.join("scene"), 6, false);
+    let config = dir.join("visobjd.toml");
+    std::fs::write(&config, "scene = \"scene\"\n").unwrap();
+    std::fs::write(dir.join("scene/basis/002.exr"), b"not an EXR").unwrap();
+    std::fs::remove_file(dir.join("scene/basis/005.exr")).unwrap();
+    let out = run(&["check", "--config", s(&config)]);
+    fails_with(&out, "2 of 6 lights have a basis image that cannot be used");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("light 2: ") && err.contains("002.exr"),
+        "{err}"
+    );
+    assert!(
+        err.contains("light 5: ") && err.contains("005.exr"),
+        "{err}"
+    );
+}
+
+#[test]
+fn check_says_when_the_references_would_refuse_uploads() {
+    let dir = temp_dir("cli-check-refs");
+    stripes(&dir.join("scene"), 2, false);
+    std::fs::create_dir_all(dir.join("empty")).unwrap();
+    let config = dir.join("visobjd.toml");
+    let words = |out: &std::process::Output| {
+        succeeded(out);
+        let t = String::from_utf8_lossy(&out.stdout);
+        t.split_whitespace().collect::<Vec<_>>().join(" ")
+    };
+    // An empty library outside the state folder: nothing to aim with, and read-only under
+    // the unit.
+    std::fs::write(
+        &config,
+        "scene = \"scene\"\nreferences = \"empty\"\nstate_dir = \"state\"\n",
+    )
+    .unwrap();
+    let text = words(&run(&["check", "--config", s(&config)]));
+    assert!(
+        text.contains("empty is empty: objectives need reference images"),
+        "{text}"
+    );
+    assert!(text.contains("outside state_dir"), "{text}");
+    // Under the state folder, not made yet, with images shipped in the scene.
+    std::fs::create_dir_all(dir.join("scene/refs")).unwrap();
+    std::fs::copy(reference(&dir), dir.join("scene/refs/warm.png")).unwrap();
+    std::fs::write(
+        &config,
+        "scene = \"scene\"\nreferences = \"state/refs\"\nstate_dir = \"state\"\n",
+    )
+    .unwrap();
+    let text = words(&run(&["check", "--config", s(&config)]));
+    assert!(
+        text.contains("does not exist yet: the daemon makes it at start"),
+        "{text}"
+    );
+    assert!(!text.contains("outside state_dir"), "{text}");
+    std::fs::create_dir_all(dir.join("state/refs")).unwrap();
+    let text = words(&run(&["check", "--config", s(&config)]));
+    assert!(text.contains("the daemon copies the scene's"), "{text}");
+}
+
+#[test]
 fn basis_images_may_be_half_or_float_rgb_or_rgba_scanline_or_tiled() {
     use exr::prelude::*;
     let dir = temp_dir("cli-exr-kinds");

@@ -8,7 +8,7 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use crate::common::bin;
-use crate::common::daemon::{Daemon, PATIENCE, PROTOS, UNIVERSES};
+use crate::common::daemon::{Daemon, Osc, PATIENCE, PROTOS, UNIVERSES};
 
 /// Every sender address seen on the wire from `since`, and whether any sACN packet since
 /// then terminated its stream.
@@ -117,4 +117,41 @@ fn a_second_instance_on_taken_ports_sends_nothing() {
     );
     assert!(stderr.contains("address already in use"), "{stderr}");
     assert_only_the_first_sent(&d, &before, since);
+}
+
+#[test]
+fn an_empty_library_under_the_state_folder_starts_with_the_scenes_references() {
+    let mut d = Daemon::start("stock-references");
+    d.terminate();
+    // The booth's layout: the library in the (writable) state folder, the scene shipping
+    // its own refs/.
+    let shipped = d.dir.join("scene/refs");
+    std::fs::create_dir_all(&shipped).expect("mkdir scene/refs");
+    for name in ["warm.png", "cool.png"] {
+        std::fs::copy(d.refs().join(name), shipped.join(name)).expect("ship a reference");
+    }
+    let text = std::fs::read_to_string(d.config_path()).expect("config");
+    std::fs::write(
+        d.config_path(),
+        text.replace("references = \"refs\"", "references = \"state/refs\""),
+    )
+    .expect("write the config");
+    d.restart();
+    let library = d.state_dir().join("refs");
+    let mut names: Vec<String> = std::fs::read_dir(&library)
+        .expect("the library exists")
+        .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    assert_eq!(names, ["cool.png", "warm.png"]);
+    d.add_objective("warm.png", "both");
+
+    // Not stocked again once it holds images: a deleted one stays deleted.
+    std::fs::remove_file(library.join("cool.png")).expect("delete one");
+    d.terminate();
+    d.restart();
+    assert!(
+        !library.join("cool.png").exists(),
+        "the library was stocked again"
+    );
 }
