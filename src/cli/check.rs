@@ -7,6 +7,7 @@ use std::path::PathBuf;
 use crate::config::Config;
 use visobjd_dmx::Patch;
 use visobjd_method::stage::{Stage, THUMB_WIDTH};
+use visobjd_scene::Scene;
 
 /// Arguments of `check`.
 #[derive(clap::Args)]
@@ -61,7 +62,8 @@ fn references(config: &Config) -> String {
 /// Runs `check`: the first problem found is the error; otherwise the summary.
 pub fn run(args: Args) -> anyhow::Result<()> {
     let config = Config::load(&args.config).map_err(anyhow::Error::msg)?;
-    let stage = Stage::load(&config.scene, THUMB_WIDTH)?;
+    // Every unusable image is listed, not only the first.
+    let stage = Stage::from_scene(Scene::load(&config.scene)?, THUMB_WIDTH)?;
     let scene = &stage.scene;
     if !stage.unseen.is_empty() {
         let each: Vec<String> = stage

@@ -7,7 +7,7 @@ use clap::ArgMatches;
 use rand::SeedableRng;
 use serde::Serialize;
 
-use visobjd_method::gallery::Generation;
+use visobjd_method::gallery::{Generation, MAX_SEED};
 use visobjd_method::objective::{
     Aspects, Objective, ObjectiveRecord, Region, analyze, decode_reference,
 };
@@ -41,7 +41,8 @@ pub struct Args {
     /// Gallery entries at most (c).
     #[arg(long, default_value_t = 12, value_parser = clap::value_parser!(u32).range(1..=64))]
     clusters: u32,
-    /// Random seed; the same inputs and seed give the same gallery. Default: a new one.
+    /// Random seed (0..=2147483647, the daemon's range: `/vo/generate/seeded` replays it
+    /// live); the same inputs and seed give the same gallery. Default: a new one.
     #[arg(long)]
     seed: Option<u64>,
     /// Colours per palette.
@@ -125,7 +126,15 @@ pub fn run(args: Args, matches: &ArgMatches) -> anyhow::Result<()> {
         }
     }
 
-    let seed = args.seed.unwrap_or_else(rand::random);
+    if let Some(seed) = args.seed.filter(|&s| s > MAX_SEED) {
+        bail!(
+            "--seed {seed}: seeds are 0..={MAX_SEED}, the daemon's range, so that \
+             /vo/generate/seeded can replay the gallery live"
+        );
+    }
+    let seed = args
+        .seed
+        .unwrap_or_else(|| rand::random_range(1..=MAX_SEED));
     let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(seed);
     let started = std::time::Instant::now();
     let generation = stage.generate(

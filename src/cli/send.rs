@@ -25,7 +25,8 @@ pub struct Args {
     /// Seconds to wait for replies (each is printed as one line).
     #[arg(long, default_value_t = 1.0)]
     wait: f64,
-    /// Send every argument as a string (otherwise: int, else float, else string).
+    /// Send every argument as a string (otherwise: int32, else int64 (an OSC `h`, such as a
+    /// 64-bit seed), else float, else string).
     #[arg(short = 's', long = "strings")]
     strings: bool,
     /// The OSC address, e.g. /vo/ping.
@@ -55,7 +56,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let to = resolve(&args.to)?;
     let wait = Duration::from_secs_f64(args.wait);
     let mut out = std::io::stdout().lock();
-    let mut print = |m: OscMessage| writeln!(out, "{}", format_message(&m));
+    let mut replies = 0usize;
+    let mut print = |m: OscMessage| {
+        replies += 1;
+        writeln!(out, "{}", format_message(&m))
+    };
     if args.tcp || args.slip {
         let framing = if args.slip {
             Framing::Slip
@@ -116,17 +121,34 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             }
         }
     }
+    if replies == 0 && !wait.is_zero() {
+        let hint = if args.tcp || args.slip {
+            "is visobjd listening there (osc.tcp), and is this machine in its osc.allow?"
+        } else {
+            "is visobjd listening there (osc.udp), and is this machine in its osc.allow? With \
+             osc.reply_port set, replies go to that port instead of this one: send with --tcp \
+             to get them on the connection"
+        };
+        bail!(
+            "no reply from {to} within {} s: {hint} (--wait gives more time)",
+            args.wait
+        );
+    }
     Ok(())
 }
 
-/// An argument typed by its spelling: int if it is an int32, float if it is a finite
-/// float32, else a string (always a string with `-s`).
+/// An argument typed by its spelling: int if it is an int32, int64 if it is a larger
+/// whole number, float if it is a finite float32, else a string (always a string with
+/// `-s`).
 fn typed(arg: &str, strings: bool) -> OscType {
     if strings {
         return OscType::String(arg.into());
     }
     if let Ok(i) = arg.parse::<i32>() {
         return OscType::Int(i);
+    }
+    if let Ok(i) = arg.parse::<i64>() {
+        return OscType::Long(i);
     }
     match arg.parse::<f32>() {
         Ok(f) if f.is_finite() => OscType::Float(f),
@@ -193,7 +215,8 @@ mod tests {
         assert_eq!(typed("inf", false), OscType::String("inf".into()));
         assert_eq!(typed("fast", false), OscType::String("fast".into()));
         assert_eq!(typed("3", true), OscType::String("3".into()));
-        assert_eq!(typed("99999999999", false), OscType::Float(99999999999.0));
+        assert_eq!(typed("99999999999", false), OscType::Long(99_999_999_999));
+        assert_eq!(typed("1e20", false), OscType::Float(1e20));
     }
 
     #[test]

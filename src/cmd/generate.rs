@@ -6,6 +6,7 @@ use rosc::OscMessage;
 use super::{Context, int, int_arg, switch_arg};
 use crate::engine::{Outcome, Refusal, msg};
 use crate::osc::args::Request;
+use visobjd_method::gallery::MAX_SEED;
 
 pub enum Cmd {
     /// Starts a generate; the reply, `/vo/generated`, goes to the peer when it is done.
@@ -30,7 +31,7 @@ impl Cmd {
         Ok(Some(if req.matches("/vo/generate").is_some() {
             Cmd::Generate
         } else if req.matches("/vo/generate/seeded").is_some() {
-            Cmd::Seeded(int_arg(req, 0, "seed", 1, i64::from(i32::MAX))? as u64)
+            Cmd::Seeded(int_arg(req, 0, "seed", 1, MAX_SEED as i64)? as u64)
         } else if req.matches("/vo/explore").is_some() {
             Cmd::Explore(switch_arg(req, "explore")?)
         } else if req.matches("/vo/generate/count").is_some() {
@@ -43,7 +44,7 @@ impl Cmd {
             ))
         } else if req.matches("/vo/generate/seed").is_some() {
             Cmd::Set(GenerateSetting::Seed(
-                int_arg(req, 0, "seed", 0, i64::from(i32::MAX))? as u64,
+                int_arg(req, 0, "seed", 0, MAX_SEED as i64)? as u64,
             ))
         } else {
             return Ok(None);

@@ -155,7 +155,7 @@ impl Session {
     /// 1..=i32::MAX (seeds travel as OSC int32, so a random one can be replayed).
     pub fn next_seed(&self) -> u64 {
         match self.seed {
-            0 => u64::from(rand::random::<u32>() >> 1).max(1),
+            0 => rand::random_range(1..=visobjd_method::gallery::MAX_SEED),
             seed => seed,
         }
     }

@@ -311,6 +311,8 @@ fn bad_references_and_arguments_fail_with_one_line() {
 
     fails_with(&gallery(&dir.join("nope.png"), &[]), "nope.png");
     fails_with(&gallery(&good, &["--region", "0.6,0,0.4,1"]), "x0 < x1");
+    // One seed range everywhere: an offline gallery's seed can be replayed live (int32).
+    fails_with(&gallery(&good, &["--seed", "4294967296"]), "0..=2147483647");
     fails_with(&gallery(&good, &["--aspects", "smell"]), "smell");
     fails_with(
         &gallery(&good, &["--key", "nosuch"]),

@@ -730,10 +730,44 @@ fn send_reports_errors_in_one_line() {
         assert_eq!(err.trim_end().lines().count(), 1, "{err}");
         assert!(err.contains(needle), "`{needle}` not in {err}");
     }
-    // UDP with nobody listening still sent: success, no output.
+    // UDP with nobody listening, not waiting for a reply: sent, success, no output.
     let out = send(&["--to", closed.as_str(), "--wait", "0", "/vo/ping"]);
     assert!(out.status.success());
     assert!(out.stdout.is_empty());
+    // Waiting for a reply that never comes: said on stderr, with the hint, and a failure.
+    let silent = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let to = silent.local_addr().unwrap().to_string();
+    let out = send(&["--to", &to, "--wait", "0.2", "/vo/ping"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "no reply, yet success");
+    assert!(
+        err.contains(&format!("no reply from {to} within 0.2 s")),
+        "{err}"
+    );
+    assert!(err.contains("--tcp"), "{err}");
+    let mut buf = [0u8; 512];
+    assert!(
+        silent.recv(&mut buf).is_ok(),
+        "the message was sent all the same"
+    );
+}
+
+#[test]
+fn send_sends_whole_numbers_beyond_int32_as_int64() {
+    let h = serve();
+    let to = h.udp().to_string();
+    let out = send(&["--to", &to, "/echo", "4294967296", "7"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(String::from_utf8_lossy(&out.stdout), "/echo 4294967296 7\n");
+    let seen = h.handler.seen.lock().unwrap();
+    assert_eq!(
+        seen[0].args,
+        [OscType::Long(4_294_967_296), OscType::Int(7)]
+    );
 }
 
 const PYTHON_CLIENT: &str = r#"

@@ -44,11 +44,33 @@ pub struct Stage {
 }
 
 impl Stage {
-    /// Loads `dir/scene.toml` and its basis images, keeping thumbnails `thumb_width` wide
-    /// (0: full size).
+    /// Loads `dir/scene.toml` and every one of its basis images, keeping thumbnails
+    /// `thumb_width` wide (0: full size): what the offline tools (a gallery, a render)
+    /// need, where a light missing from the pictures would mislead. The error is the first
+    /// unusable image, with how many more there are. The daemon, which must run without a
+    /// bad image's light, uses [`Stage::from_scene`] and its [`Stage::unseen`].
     pub fn load(dir: &Path, thumb_width: usize) -> Result<Stage, SceneError> {
         let scene = Scene::load(dir)?;
-        Stage::from_scene(scene, thumb_width)
+        let mut stage = Stage::from_scene(scene, thumb_width)?;
+        let more = stage.unseen.len().saturating_sub(1);
+        let first = std::mem::take(&mut stage.unseen).into_iter().next();
+        match first {
+            None => Ok(stage),
+            Some(u) if more == 0 => Err(u.error),
+            Some(u) => Err(SceneError::Basis {
+                path: match &u.error {
+                    SceneError::Basis { path, .. } => path.clone(),
+                    _ => stage.scene.lights[u.light].basis.clone(),
+                },
+                message: format!(
+                    "{} (and {more} more basis images cannot be used: `visobjd check` lists them)",
+                    match u.error {
+                        SceneError::Basis { message, .. } => message,
+                        other => other.to_string(),
+                    }
+                ),
+            }),
+        }
     }
 
     /// Loads the basis images of an already validated scene.
