@@ -19,13 +19,13 @@ use visobjd_scene::look::Look;
 /// prototype's were 100x100). 96 x 54 on a 16:9 stage has a third fewer pixels to render,
 /// convert and compare than 120 px wide, and the gallery phase of a generate takes about
 /// two thirds of the time.
-
 pub const PROXY_WIDTH: usize = 96;
 
 /// The largest seed: seeds travel as OSC int32 (a console macro, TouchOSC, `/vo/generated`),
 /// so every seed (the daemon's, the offline `gallery`'s, a random one) lies in
 /// `0..=MAX_SEED` and any gallery can be replayed live with its seed.
 pub const MAX_SEED: u64 = i32::MAX as u64;
+
 /// Starting threshold, in Delta-E units.
 pub const START_THRESHOLD: f32 = 20.0;
 /// The threshold never falls below this.
