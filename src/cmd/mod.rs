@@ -24,6 +24,7 @@ mod objective;
 mod reload;
 mod runner;
 mod status;
+mod suggest;
 mod test_hook;
 mod transfer;
 
@@ -101,10 +102,13 @@ impl Command {
         if let Some(c) = transfer::Cmd::parse(req)? {
             return Ok(Command::Transfer(c));
         }
-        Err(format!(
-            "unknown address {}: the addresses are listed in docs/osc.md",
-            req.path()
-        ))
+        let path = req.path();
+        Err(match suggest::nearest(&path) {
+            Some(meant) => format!(
+                "unknown address {path}: did you mean {meant}? The addresses are listed in docs/osc.md"
+            ),
+            None => format!("unknown address {path}: the addresses are listed in docs/osc.md"),
+        })
     }
 
     /// The address family, for [`parse`]'s callers.

@@ -143,6 +143,22 @@ fn unknown_addresses_are_errors_and_garbage_gets_nothing() {
     ] {
         d.refused(addr, vec![int(1)]);
     }
+    // A near miss names the address meant, and where the list is.
+    for (sent, meant) in [
+        ("/vo/pikc", "/vo/pick"),
+        ("/vo/pingg", "/vo/ping"),
+        ("/vo/light/4/levle", "/vo/light/4/level"),
+        ("/vo/objectives/add", "/vo/objective/add"),
+    ] {
+        let why = d.refused(sent, vec![int(1)]);
+        assert!(
+            why.contains(&format!("did you mean {meant}?")),
+            "{sent}: {why}"
+        );
+        assert!(why.contains("docs/osc.md"), "{why}");
+    }
+    let far = d.refused("/other/ping", vec![]);
+    assert!(!far.contains("did you mean"), "{far}");
     let mut raw = d.client();
     raw.send_raw(b"GET / HTTP/1.1\r\n\r\n");
     raw.send_raw(&[0xff; 40]);
