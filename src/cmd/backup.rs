@@ -71,7 +71,7 @@ impl Cmd {
 
 /// Argument `i`, a JSON text, named `what` in errors.
 fn part(req: &Request, i: usize, what: &str) -> Result<String, String> {
-    Ok(args::string(args::required(&req.args, i, what)?, what)?.to_string())
+    Ok(args::string(req.required(i, what)?, what)?.to_string())
 }
 
 /// Err unless this daemon is a backup (which takes `what` only from its main:

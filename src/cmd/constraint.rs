@@ -72,11 +72,8 @@ impl Cmd {
         if let Some(c) = req.matches("/vo/group/*/ratio") {
             return Ok(Some(Cmd::Ratio {
                 name: c[0].to_string(),
-                of: args::string(
-                    args::required(&req.args, 0, "group to follow")?,
-                    "group to follow",
-                )?
-                .to_string(),
+                of: args::string(req.required(0, "group to follow")?, "group to follow")?
+                    .to_string(),
                 ratio: num_arg(req, 1, "ratio", 0.0, f64::from(MAX_RATIO))?,
             }));
         }
@@ -98,7 +95,7 @@ impl Cmd {
             }
             if let Some(c) = req.matches(&format!("/vo/{kind}/*/exclude")) {
                 let mode = Exclude::parse(args::string(
-                    args::required(&req.args, 0, "exclude (ignore, off or none)")?,
+                    req.required(0, "exclude (ignore, off or none)")?,
                     "exclude",
                 )?)?;
                 return Ok(Some(Cmd::Exclude {

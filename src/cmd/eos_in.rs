@@ -29,7 +29,7 @@ impl Cmd {
     pub fn parse(req: &Request) -> Result<Option<Cmd>, String> {
         if req.segments.len() >= 2 && req.segments[0] == "eos" && req.segments[1] == "out" {
             let active = req.matches("/eos/out/active/chan").is_some();
-            let text = req.args.iter().find_map(|a| match a {
+            let text = req.args().iter().find_map(|a| match a {
                 OscType::String(s) => Some(s.as_str()),
                 _ => None,
             });

@@ -23,7 +23,7 @@ impl Cmd {
     pub fn parse(req: &Request) -> Result<Option<Cmd>, String> {
         let n = |req: &Request| int_arg(req, 0, "look number", 1, MAX_LOOK).map(|n| n as u32);
         Ok(Some(if req.matches("/vo/look/save").is_some() {
-            let label = match req.args.get(1) {
+            let label = match req.arg(1) {
                 Some(a) => Some(args::string(a, "label")?.to_string()),
                 None => None,
             };

@@ -61,8 +61,18 @@ enum Command {
 }
 
 impl Command {
-    /// The command `req` names; Err is the sentence for `/vo/error` (an input refusal).
+    /// The command `req` names; Err is the sentence for `/vo/error` (an input refusal),
+    /// arguments the command does not take included.
     fn parse(req: &Request) -> Result<Command, String> {
+        let command = Command::parse_family(req)?;
+        match req.extra() {
+            Some(extra) => Err(extra),
+            None => Ok(command),
+        }
+    }
+
+    /// The command of the family that knows `req`'s address.
+    fn parse_family(req: &Request) -> Result<Command, String> {
         if let Some(c) = backup::Cmd::parse(req)? {
             return Ok(Command::Backup(c));
         }
@@ -244,7 +254,7 @@ pub fn parse(bytes: &[u8]) -> Result<Vec<Result<&'static str, String>>, PacketEr
 
 /// Argument `i` as a whole number in `min..=max`.
 fn int_arg(req: &Request, i: usize, what: &str, min: i64, max: i64) -> Result<i64, String> {
-    let v = args::integer(args::required(&req.args, i, what)?, what)?;
+    let v = args::integer(req.required(i, what)?, what)?;
     if !(min..=max).contains(&v) {
         return Err(format!("{what} must be {min}..={max}, got {v}"));
     }
@@ -260,7 +270,7 @@ fn opt_int_arg(
     max: i64,
     default: i64,
 ) -> Result<i64, String> {
-    if req.args.len() > i {
+    if req.arg(i).is_some() {
         int_arg(req, i, what, min, max)
     } else {
         Ok(default)
@@ -269,7 +279,7 @@ fn opt_int_arg(
 
 /// Argument `i` as a number in `min..=max`.
 fn num_arg(req: &Request, i: usize, what: &str, min: f64, max: f64) -> Result<f32, String> {
-    args::number_in(args::required(&req.args, i, what)?, what, min, max).map(|v| v as f32)
+    args::number_in(req.required(i, what)?, what, min, max).map(|v| v as f32)
 }
 
 /// Arguments `i..i+3` as an sRGB colour, each 0..1.
@@ -283,7 +293,7 @@ fn rgb_args(req: &Request, i: usize) -> Result<[f32; 3], String> {
 
 /// Argument 0 as a 0/1 switch.
 fn switch_arg(req: &Request, what: &str) -> Result<bool, String> {
-    args::switch(args::required(&req.args, 0, what)?, what)
+    args::switch(req.required(0, what)?, what)
 }
 
 /// A group or a light, named as an address names it (`/vo/group/<name>/...`,

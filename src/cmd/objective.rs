@@ -49,7 +49,7 @@ fn id(segment: &str) -> Result<Which, String> {
 }
 
 fn aspects(req: &Request, i: usize) -> Result<Aspects, String> {
-    match req.args.get(i) {
+    match req.arg(i) {
         None => Ok(Aspects::Both),
         Some(a) => Aspects::parse(args::string(a, "aspects")?),
     }
@@ -58,7 +58,7 @@ fn aspects(req: &Request, i: usize) -> Result<Aspects, String> {
 impl Cmd {
     pub fn parse(req: &Request) -> Result<Option<Cmd>, String> {
         if req.matches("/vo/objective/add").is_some() {
-            let image = args::string(args::required(&req.args, 0, "image")?, "image")?;
+            let image = args::string(req.required(0, "image")?, "image")?;
             return Ok(Some(Cmd::Add {
                 image: image.to_string(),
                 aspects: aspects(req, 1)?,
@@ -77,14 +77,11 @@ impl Cmd {
         Ok(Some(Cmd::Edit(match what {
             "aspects" => Edit::Aspects {
                 id: id(seg)?,
-                aspects: Aspects::parse(args::string(
-                    args::required(&req.args, 0, "aspects")?,
-                    "aspects",
-                )?)?,
+                aspects: Aspects::parse(args::string(req.required(0, "aspects")?, "aspects")?)?,
             },
             "region" => Edit::Region {
                 id: id(seg)?,
-                region: if req.args.is_empty() {
+                region: if req.arg(0).is_none() {
                     Region::FULL
                 } else {
                     Region::new(

@@ -60,7 +60,7 @@ impl Runner {
         }
         let forward = command.forwarded().then(|| OscMessage {
             addr: req.path(),
-            args: req.args.clone(),
+            args: req.args().to_vec(),
         });
         command.apply(&Context {
             engine: &self.engine,

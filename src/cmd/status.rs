@@ -20,7 +20,7 @@ pub enum Cmd {
 impl Cmd {
     pub fn parse(req: &Request) -> Result<Option<Cmd>, String> {
         Ok(Some(if req.matches("/vo/ping").is_some() {
-            Cmd::Ping(req.args.clone())
+            Cmd::Ping(req.args().to_vec())
         } else if req.matches("/vo/status").is_some() {
             Cmd::Status
         } else if req.matches("/vo/subscribe").is_some() {

@@ -15,7 +15,7 @@ impl Cmd {
         Ok(Some(if req.matches("/vo/test/stall").is_some() {
             Cmd(TestHook::StallDmx(switch_arg(req, "stall")?))
         } else if req.matches("/vo/test/panic").is_some() {
-            match args::string(args::required(&req.args, 0, "where")?, "where")? {
+            match args::string(req.required(0, "where")?, "where")? {
                 "dmx" => Cmd(TestHook::PanicDmx),
                 "generate" => Cmd(TestHook::PanicGenerate),
                 other => return Err(format!("where must be dmx or generate, got `{other}`")),

@@ -29,10 +29,7 @@ impl Cmd {
             return Ok(None);
         }
         let entry = int_arg(req, 0, "entry", 1, 1_000_000)? as usize;
-        let kind = args::string(
-            args::required(&req.args, 1, "region or group")?,
-            "region or group",
-        )?;
+        let kind = args::string(req.required(1, "region or group")?, "region or group")?;
         let part = match kind.to_ascii_lowercase().as_str() {
             "region" => Part::Region(Region::new(
                 num_arg(req, 2, "x0", 0.0, 1.0)?,
@@ -40,10 +37,9 @@ impl Cmd {
                 num_arg(req, 4, "x1", 0.0, 1.0)?,
                 num_arg(req, 5, "y1", 0.0, 1.0)?,
             )?),
-            "group" => Part::Group(
-                args::string(args::required(&req.args, 2, "group name")?, "group name")?
-                    .to_string(),
-            ),
+            "group" => {
+                Part::Group(args::string(req.required(2, "group name")?, "group name")?.to_string())
+            }
             other => {
                 return Err(format!(
                     "transfer takes `region x0 y0 x1 y1` or `group NAME` after the entry, got `{other}`"

@@ -6,6 +6,8 @@
 //! - Addresses match case-insensitively.
 //! - A trigger arriving with a single numeric 0 is a button release, ignored silently.
 
+use std::sync::atomic::{AtomicUsize, Ordering};
+
 use rosc::{OscMessage, OscType};
 
 /// The addresses that take no argument (docs/osc.md), as [`Request::matches`] patterns: a
@@ -40,8 +42,27 @@ pub struct Request {
     pub addr: String,
     /// Lowercase path segments (`/VO/Pick/3` gives `["vo", "pick"]`).
     pub segments: Vec<String>,
-    /// The arguments, trailing path numbers first.
-    pub args: Vec<OscType>,
+    /// The arguments, trailing path numbers first (read through [`Request::arg`] and
+    /// [`Request::args`], which count what the command read).
+    args: Vec<OscType>,
+    /// How many arguments the command read: any after them are extra ([`Request::extra`]).
+    read: Reads,
+}
+
+/// The highest argument index read, plus one. Cloned by value; never part of equality.
+#[derive(Debug, Default)]
+struct Reads(AtomicUsize);
+
+impl Clone for Reads {
+    fn clone(&self) -> Self {
+        Reads(AtomicUsize::new(self.0.load(Ordering::Relaxed)))
+    }
+}
+
+impl PartialEq for Reads {
+    fn eq(&self, _: &Self) -> bool {
+        true
+    }
 }
 
 impl Request {
@@ -72,7 +93,50 @@ impl Request {
             addr: msg.addr,
             segments,
             args,
+            read: Reads::default(),
         }
+    }
+
+    /// Argument `i` (counted as read, present or not: an optional argument was looked at).
+    pub fn arg(&self, i: usize) -> Option<&OscType> {
+        self.read.0.fetch_max(i + 1, Ordering::Relaxed);
+        self.args.get(i)
+    }
+
+    /// Argument `i`, which the command needs: a sentence naming `what` when it is missing.
+    pub fn required(&self, i: usize, what: &str) -> Result<&OscType, String> {
+        self.arg(i)
+            .ok_or_else(|| format!("missing {what} (argument {})", i + 1))
+    }
+
+    /// Every argument (all counted as read: the command takes any number).
+    pub fn args(&self) -> &[OscType] {
+        self.read.0.fetch_max(self.args.len(), Ordering::Relaxed);
+        &self.args
+    }
+
+    /// After a command parsed: the sentence for arguments it did not read, which would
+    /// otherwise be ignored silently (`/vo/fade 2 3`). A trigger takes one argument of any
+    /// value (a button's press) and no more.
+    pub fn extra(&self) -> Option<String> {
+        let trigger = TRIGGERS.iter().any(|t| self.matches(t).is_some());
+        let read = self
+            .read
+            .0
+            .load(Ordering::Relaxed)
+            .max(usize::from(trigger));
+        (self.args.len() > read).then(|| {
+            let takes = match read {
+                0 => "takes no arguments".to_string(),
+                1 => "takes 1 argument".to_string(),
+                n => format!("takes at most {n} arguments"),
+            };
+            format!(
+                "{} {takes}, got {}: the extra ones would be ignored (docs/osc.md)",
+                self.path(),
+                self.args.len()
+            )
+        })
     }
 
     /// The address without its trailing numbers, lowercase (`/vo/pick`).
@@ -176,11 +240,6 @@ pub fn string<'a>(arg: &'a OscType, what: &str) -> Result<&'a str, String> {
 }
 
 /// The argument at `index`, or an error naming what is missing.
-pub fn required<'a>(args: &'a [OscType], index: usize, what: &str) -> Result<&'a OscType, String> {
-    args.get(index)
-        .ok_or_else(|| format!("missing {what} (argument {})", index + 1))
-}
-
 /// An argument as a person would name it in an error: `the string "fast"`, `the int 3`.
 pub fn describe(arg: &OscType) -> String {
     match arg {
@@ -267,7 +326,7 @@ mod tests {
             "expected a string for image, got the int 4"
         );
         assert_eq!(
-            required(&[], 0, "an entry").unwrap_err(),
+            req("/vo/pick", vec![]).required(0, "an entry").unwrap_err(),
             "missing an entry (argument 1)"
         );
     }

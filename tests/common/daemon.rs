@@ -397,6 +397,10 @@ pub trait Osc {
         let mut got = Vec::new();
         while let Some(left) = end.checked_duration_since(Instant::now()) {
             if let Some(m) = self.next(left) {
+                // A start-up ping's pong can come late, once several were sent.
+                if m.addr == "/vo/pong" && m.args.first() == Some(&string("ready")) {
+                    continue;
+                }
                 let done = m.addr == until || m.addr == "/vo/error";
                 got.push(m);
                 if done {
@@ -482,6 +486,10 @@ pub trait Osc {
             if let Some(m) = self.next(left) {
                 if m.addr == "/vo/pong" && m.args == [string("fence"), int(token)] {
                     return before;
+                }
+                // A start-up ping's pong can come late, once several were sent.
+                if m.addr == "/vo/pong" && m.args.first() == Some(&string("ready")) {
+                    continue;
                 }
                 before.push(m);
             }

@@ -159,6 +159,16 @@ fn unknown_addresses_are_errors_and_garbage_gets_nothing() {
     }
     let far = d.refused("/other/ping", vec![]);
     assert!(!far.contains("did you mean"), "{far}");
+    // Arguments a command does not take are refused, not ignored; a trigger takes a
+    // button's one value; a ping takes anything.
+    let why = d.refused("/vo/fade", vec![float(2.0), float(3.0)]);
+    assert!(why.contains("/vo/fade takes 1 argument, got 2"), "{why}");
+    let why = d.refused("/vo/light/1/level", vec![int(50), int(60)]);
+    assert!(why.contains("takes 1 argument, got 2"), "{why}");
+    d.ok("/vo/status", vec![float(1.0)], "/vo/status");
+    let why = d.refused("/vo/status", vec![float(1.0), float(1.0)]);
+    assert!(why.contains("/vo/status takes 1 argument, got 2"), "{why}");
+    d.ok("/vo/ping", vec![int(1), int(2), int(3)], "/vo/pong");
     let mut raw = d.client();
     raw.send_raw(b"GET / HTTP/1.1\r\n\r\n");
     raw.send_raw(&[0xff; 40]);

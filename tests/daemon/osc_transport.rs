@@ -44,7 +44,7 @@ impl Handler for TestHandler {
     fn handle(&self, m: Request, peer: &Peer) -> Vec<OscMessage> {
         self.seen.lock().unwrap().push(m.clone());
         match m.addr.to_lowercase().as_str() {
-            "/echo" => vec![msg("/echo", m.args)],
+            "/echo" => vec![msg("/echo", m.args().to_vec())],
             "/vo/generate" => vec![msg("/vo/generated", vec![])],
             "/transport" => vec![msg(
                 "/transport",
@@ -56,7 +56,7 @@ impl Handler for TestHandler {
                 vec![]
             }
             "/flood" => {
-                let n = m.args.first().and_then(|a| a.clone().int()).unwrap_or(0);
+                let n = m.args().first().and_then(|a| a.clone().int()).unwrap_or(0);
                 let ok = (0..n).all(|i| peer.reply(&[msg("/flood", vec![OscType::Int(i)])]));
                 vec![msg("/flooded", vec![OscType::Bool(ok)])]
             }
@@ -681,7 +681,7 @@ fn send_over_udp() {
     let out = send(&["--to", &to, "-s", "/echo", "1"]);
     assert_eq!(String::from_utf8_lossy(&out.stdout), "/echo 1\n");
     let seen = h.handler.seen.lock().unwrap();
-    assert_eq!(seen[1].args, [OscType::String("1".into())]);
+    assert_eq!(seen[1].args(), [OscType::String("1".into())]);
 }
 
 #[test]
@@ -765,7 +765,7 @@ fn send_sends_whole_numbers_beyond_int32_as_int64() {
     assert_eq!(String::from_utf8_lossy(&out.stdout), "/echo 4294967296 7\n");
     let seen = h.handler.seen.lock().unwrap();
     assert_eq!(
-        seen[0].args,
+        seen[0].args(),
         [OscType::Long(4_294_967_296), OscType::Int(7)]
     );
 }
