@@ -140,6 +140,13 @@ impl Cmd {
                 }
                 Edit::Region { id, region } => {
                     let (i, id) = find(s, id)?;
+                    if !footprints.select(region).contains(&true) {
+                        return Err(Refusal::input(format!(
+                            "region {} {} {} {} selects no light (none lights that part of the \
+                             stage): objective {id} keeps its region; draw it where a light falls",
+                            region.x0, region.y0, region.x1, region.y1
+                        )));
+                    }
                     s.objectives[i].objective.region = region;
                     Outcome::reply(region_reply(id, region, footprints)).saved()
                 }

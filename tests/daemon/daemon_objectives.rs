@@ -2,8 +2,9 @@
 //! aspects, region, palette, colour, remove, clear and the listing, each with refused cases
 //! that change nothing, and hostile image paths.
 
-use crate::common::daemon::{Daemon, Osc, float, int, num, string, text};
+use crate::common::daemon::{Daemon, Osc, Setup, float, int, num, string, text};
 use rosc::OscMessage;
+use visobjd_testkit::TestLight;
 
 fn near(a: f64, b: f64, tol: f64) -> bool {
     (a - b).abs() <= tol
@@ -297,4 +298,33 @@ fn remove_clear_and_list() {
     let r = d.ok("/vo/objective/clear", vec![], "/vo/objective/cleared");
     assert_eq!(num(&r.args[0]) as i32, 0);
     d.refused(&format!("/vo/objective/{a}/aspects"), vec![string("both")]);
+}
+
+#[test]
+fn a_region_that_selects_no_light_is_refused_and_says_so() {
+    // Two lights on the left half of the stage; the right half stays dark.
+    let scene = visobjd_testkit::temp_dir("obj-dark-half");
+    let lights = vec![
+        TestLight::rect(1, Some("left"), "dimmer", 1, (0, 0, 12, 24), 0.6),
+        TestLight::rect(2, Some("left"), "dimmer", 2, (12, 0, 24, 24), 0.6),
+    ];
+    visobjd_testkit::write_scene(&scene, 48, 24, &["left"], &lights);
+    let mut d = Daemon::start_setup(
+        "obj-dark-region",
+        Setup {
+            scene_from: Some(scene.clone()),
+            ..Setup::default()
+        },
+    );
+    let id = d.add_objective("warm.png", "both");
+    let addr = format!("/vo/objective/{id}/region");
+    d.ok(
+        &addr,
+        [0.0, 0.0, 0.5, 1.0].map(float).to_vec(),
+        "/vo/objective/region",
+    );
+    let why = d.refused(&addr, [0.6, 0.0, 1.0, 1.0].map(float).to_vec());
+    assert!(why.contains("selects no light"), "{why}");
+    assert_eq!(listed(&d.objectives()[0]).3, [0.0, 0.0, 0.5, 1.0]);
+    std::fs::remove_dir_all(&scene).ok();
 }
