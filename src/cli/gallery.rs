@@ -125,6 +125,14 @@ pub fn run(args: Args, matches: &ArgMatches) -> anyhow::Result<()> {
             constraints.locked[l] = true;
         }
     }
+    if !args.lock.is_empty() && args.base.is_none() {
+        tracing::warn!(
+            "--lock {} without --base: locked groups keep the base look's level, and without \
+             --base every light starts off, so they stay at 0 in every entry (give the look \
+             to keep them at with --base FILE)",
+            args.lock.join(", ")
+        );
+    }
 
     if let Some(seed) = args.seed.filter(|&s| s > MAX_SEED) {
         bail!(

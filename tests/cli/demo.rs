@@ -102,3 +102,42 @@ fn gallery_brightness_follows_the_references() {
         }
     }
 }
+
+#[test]
+fn gallery_warns_that_a_lock_without_a_base_holds_the_group_off() {
+    let dir = visobjd_testkit::temp_dir("cli-lock-no-base");
+    let run = |extra: &[&str]| {
+        let mut args = vec![
+            "gallery".to_string(),
+            "--scene".into(),
+            DEMO.into(),
+            "--ref".into(),
+            format!("{DEMO}/refs/sunset.png"),
+            "--lock".into(),
+            "front warm".into(),
+            "--count".into(),
+            "10".into(),
+            "--clusters".into(),
+            "2".into(),
+            "--seed".into(),
+            "1".into(),
+            "--out".into(),
+            dir.join("g.png").display().to_string(),
+        ];
+        args.extend(extra.iter().map(|a| a.to_string()));
+        std::process::Command::new(common::bin())
+            .args(&args)
+            .output()
+            .expect("visobjd gallery runs")
+    };
+    let out = run(&[]);
+    assert!(out.status.success(), "{out:?}");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("--lock front warm without --base"), "{err}");
+    let base = dir.join("base.json");
+    std::fs::write(&base, r#"{"lights": [{"channel": 1, "intensity": 0.5}]}"#).unwrap();
+    let out = run(&["--base", &base.display().to_string()]);
+    assert!(out.status.success(), "{out:?}");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!err.contains("without --base"), "{err}");
+}
