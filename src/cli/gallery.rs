@@ -181,11 +181,43 @@ pub fn run(args: Args, matches: &ArgMatches) -> anyhow::Result<()> {
 }
 
 /// Reads a look file for `stage`'s scene.
+/// A look file, or with `FILE#N` saved look N of the daemon's `looks.json` (its state
+/// folder's), on `stage`.
 pub fn read_look(path: &Path, stage: &Stage) -> anyhow::Result<visobjd_scene::look::Look> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("{}: cannot read", path.display()))?;
-    let file: LookFile = serde_json::from_str(&text)
-        .map_err(|e| anyhow::anyhow!("{}: not a look file: {e}", path.display()))?;
+    let spelled = path.to_string_lossy();
+    let saved = spelled
+        .rsplit_once('#')
+        .and_then(|(file, n)| Some((Path::new(file), n.parse::<u32>().ok()?)));
+    let (path, file) = match saved {
+        Some((path, n)) => {
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("{}: cannot read", path.display()))?;
+            let saved: crate::engine::persist::LooksFile =
+                serde_json::from_str(&text).map_err(|e| {
+                    anyhow::anyhow!("{}: not the daemon's looks.json: {e}", path.display())
+                })?;
+            let numbers: Vec<String> = saved.looks.keys().map(u32::to_string).collect();
+            let Some(file) = saved.looks.get(&n).cloned() else {
+                bail!(
+                    "{}: no saved look {n} (saved: {})",
+                    path.display(),
+                    if numbers.is_empty() {
+                        "none".into()
+                    } else {
+                        numbers.join(", ")
+                    }
+                );
+            };
+            (path, file)
+        }
+        None => {
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("{}: cannot read", path.display()))?;
+            let file: LookFile = serde_json::from_str(&text)
+                .map_err(|e| anyhow::anyhow!("{}: not a look file: {e}", path.display()))?;
+            (path, file)
+        }
+    };
     file.to_look(&stage.scene)
         .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
 }

@@ -12,7 +12,8 @@ pub struct Args {
     /// The scene folder.
     #[arg(long)]
     scene: PathBuf,
-    /// The look file (JSON, as the daemon saves looks).
+    /// The look file (JSON, as the daemon saves looks), or `STATE/looks.json#N` for the
+    /// daemon's saved look N.
     #[arg(long)]
     look: PathBuf,
     /// The PNG to write.

@@ -141,3 +141,35 @@ fn gallery_warns_that_a_lock_without_a_base_holds_the_group_off() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!err.contains("without --base"), "{err}");
 }
+
+#[test]
+fn render_draws_the_readmes_example_and_a_look_the_daemon_saved() {
+    let dir = visobjd_testkit::temp_dir("cli-render-saved");
+    let render = |look: &str, out: &Path| {
+        std::process::Command::new(common::bin())
+            .args(["render", "--scene", DEMO, "--look", look, "--out"])
+            .arg(out)
+            .args(["--width", "160"])
+            .output()
+            .expect("visobjd render runs")
+    };
+    let example = format!("{DEMO}/looks/example.json");
+    let out = render(&example, &dir.join("example.png"));
+    assert!(out.status.success(), "{out:?}");
+    assert!(mean_lightness(&image::open(dir.join("example.png")).unwrap().to_rgb8()) > 1.0);
+
+    // looks.json as the daemon writes it: looks by number.
+    let looks = dir.join("looks.json");
+    std::fs::write(
+        &looks,
+        r#"{"looks": {"3": {"label": "act 1", "lights": [{"channel": 1, "intensity": 1.0}]}}}"#,
+    )
+    .unwrap();
+    let saved = format!("{}#3", looks.display());
+    let out = render(&saved, &dir.join("saved.png"));
+    assert!(out.status.success(), "{out:?}");
+    let out = render(&format!("{}#4", looks.display()), &dir.join("none.png"));
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("no saved look 4 (saved: 3)"), "{err}");
+}
