@@ -33,8 +33,8 @@ pub struct Args {
     /// Seconds a light is given to reach its level (default `[capture] settle_s`).
     #[arg(long)]
     settle: Option<f64>,
-    /// What the camera writes: `jpeg`, or `raw` (linear 16-bit TIFF; camera raw formats
-    /// are not read yet).
+    /// What the camera writes: `jpeg` (its response is recovered once per session), or
+    /// `raw` (DNG or the camera's own raw format, read as linear sensor values).
     #[arg(long, default_value = "jpeg")]
     format: String,
     /// Basis width in pixels (the height follows the camera's aspect).

@@ -275,3 +275,74 @@ fn per_emitter_preview_matches_a_shot_where_white_only_misses() {
     assert!(!stdout.contains("emitters:"), "{stdout}");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// `visobjd capture --help` and the command's synopsis in docs/capture.md name the same
+/// options, and each default the help gives is the value the synopsis shows.
+#[test]
+fn capture_help_and_the_docs_synopsis_agree() {
+    let out = Command::new(bin())
+        .args(["capture", "--help"])
+        .output()
+        .expect("visobjd capture --help runs");
+    assert!(out.status.success());
+    let help = String::from_utf8_lossy(&out.stdout);
+    let docs =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/capture.md"))
+            .expect("docs/capture.md");
+    let synopsis = docs
+        .split("## The command")
+        .nth(1)
+        .and_then(|s| s.split("```sh").nth(1))
+        .and_then(|s| s.split("```").next())
+        .expect("docs/capture.md has a ```sh synopsis under \"## The command\"");
+    // The synopsis: each `--option` and the word after it (its value, or its default).
+    let words: Vec<&str> = synopsis.split_whitespace().collect();
+    let documented: std::collections::BTreeMap<&str, &str> = words
+        .iter()
+        .enumerate()
+        .filter_map(|(i, w)| {
+            let name = w.trim_start_matches('[').trim_end_matches(']');
+            let value = words.get(i + 1).filter(|v| !v.starts_with('['));
+            name.starts_with("--")
+                .then(|| (name, value.map_or("", |v| v.trim_end_matches(']'))))
+        })
+        .collect();
+    // The help: each option line (`  -h, --help`, `      --config <CONFIG>`) and what
+    // follows it up to the next one, where clap puts `[default: X]`.
+    let mut helped: std::collections::BTreeMap<String, String> = Default::default();
+    let mut current: Option<String> = None;
+    for line in help.lines() {
+        let t = line.trim_start();
+        let option = t
+            .split_whitespace()
+            .map(|w| w.trim_end_matches(','))
+            .find(|w| w.starts_with("--"))
+            .filter(|_| t.starts_with('-'));
+        if let Some(name) = option {
+            current = Some(name.to_string());
+            helped.insert(name.to_string(), t.to_string());
+        } else if let Some(name) = &current {
+            helped.entry(name.clone()).or_default().push_str(t);
+        }
+    }
+    helped.remove("--help");
+    let help_names: Vec<&str> = helped.keys().map(String::as_str).collect();
+    let doc_names: Vec<&str> = documented.keys().copied().collect();
+    assert_eq!(
+        help_names, doc_names,
+        "--help:\n{help}\nsynopsis:\n{synopsis}"
+    );
+    for (name, text) in &helped {
+        if let Some(default) = text
+            .split("[default: ")
+            .nth(1)
+            .and_then(|d| d.split(']').next())
+        {
+            assert!(
+                documented[name.as_str()].contains(default),
+                "{name}: --help gives the default {default}, the synopsis `{}`",
+                documented[name.as_str()]
+            );
+        }
+    }
+}

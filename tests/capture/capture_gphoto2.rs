@@ -20,23 +20,55 @@ use crate::common::capture::{
     stage_lights, write_npy,
 };
 use visobjd_testkit::wire::Sacn;
-use visobjd_testkit::{temp_dir, tools};
+use visobjd_testkit::{TestLight, temp_dir, tools};
 
 /// The fake camera rendering the stage `ZOOM` times larger than the basis (capture's box
 /// downsampling to `W` then averages JPEG's blocks and the noise as a real sensor's).
 const ZOOM: usize = 4;
 
+/// A light of the fake's rig: where it is patched (universe, address), its DMX footprint
+/// and intensity slot, and its true image.
+pub struct RigLight<'a> {
+    pub light: &'a TestLight,
+    pub footprint: usize,
+    pub intensity: Option<usize>,
+}
+
 /// The fake gphoto2 set up for the test in `dir`: a `bin/gphoto2` link to it, its rig
 /// (the truth basis as `.npy`), the sACN port it listens on while shooting, its logs.
-struct Fake {
+pub struct Fake {
     dir: PathBuf,
-    port: u16,
+    pub port: u16,
+    /// The basis width asked of capture (the rig's).
+    width: usize,
     env: Vec<(OsString, OsString)>,
 }
 
 impl Fake {
-    /// `None` (after a note, or a failure under CI) without python3, Pillow, piexif, numpy.
+    /// The fake on the test stage ([`stage_lights`]).
     fn new(dir: &Path) -> Option<Fake> {
+        let lights = stage_lights();
+        let rig: Vec<RigLight<'_>> = lights
+            .iter()
+            .zip(LIGHTS)
+            .map(|(light, l)| RigLight {
+                light,
+                footprint: l.footprint,
+                intensity: l.intensity,
+            })
+            .collect();
+        Fake::on_rig(dir, (W, H), &rig, &[])
+    }
+
+    /// The fake looking at `rig` (`size`: its images' width and height), with `body` added
+    /// to its environment (`FAKE_GPHOTO2_BODY`, say). `None` (after a note, or a failure
+    /// under CI) without python3, Pillow, piexif, numpy and PiDNG.
+    pub fn on_rig(
+        dir: &Path,
+        size: (usize, usize),
+        rig: &[RigLight<'_>],
+        body: &[(&str, &str)],
+    ) -> Option<Fake> {
         if !tools::fake_gphoto2() {
             return None;
         }
@@ -50,20 +82,23 @@ impl Fake {
         // The rig: the same pixels as the scene's truth EXRs, as the fake's .npy images.
         let rig_dir = dir.join("rig");
         std::fs::create_dir_all(&rig_dir).expect("mkdir rig");
-        let mut rig = Vec::new();
-        for (light, l) in stage_lights().iter().zip(LIGHTS) {
-            let name = format!("{:03}.npy", l.channel);
-            write_npy(&rig_dir.join(&name), W, H, |x, y| (light.pixel)(x, y));
+        let mut entries = Vec::new();
+        for l in rig {
+            let name = format!("{:03}.npy", l.light.channel);
+            write_npy(&rig_dir.join(&name), size.0, size.1, |x, y| {
+                (l.light.pixel)(x, y)
+            });
             let mut entry = serde_json::json!({
-                "universe": 1, "address": l.address, "footprint": l.footprint, "basis": name,
+                "universe": l.light.universe, "address": l.light.address,
+                "footprint": l.footprint, "basis": name,
             });
             if let Some(i) = l.intensity {
                 entry["intensity"] = i.into();
             }
-            rig.push(entry);
+            entries.push(entry);
         }
         let rig_json = rig_dir.join("rig.json");
-        std::fs::write(&rig_json, serde_json::Value::from(rig).to_string()).expect("rig.json");
+        std::fs::write(&rig_json, serde_json::Value::from(entries).to_string()).expect("rig.json");
         // A free loopback port for the fake (it binds it during each capture).
         let port = UdpSocket::bind("127.0.0.1:0")
             .and_then(|s| s.local_addr())
@@ -83,23 +118,25 @@ impl Fake {
             ("FAKE_GPHOTO2_SEED", "5".into()),
         ]
         .into_iter()
+        .chain(body.iter().map(|&(k, v)| (k, v.into())))
         .map(|(k, v)| (OsString::from(k), v))
         .collect();
         Some(Fake {
             dir: dir.to_path_buf(),
             port,
+            width: size.0,
             env,
         })
     }
 
     /// `visobjd capture --config config args` with the fake as its camera and `fault`
     /// added to the fake's environment.
-    fn capture(&self, config: &Path, args: &[&str], fault: &[(&str, &str)]) -> Output {
+    pub fn capture(&self, config: &Path, args: &[&str], fault: &[(&str, &str)]) -> Output {
         Command::new(bin())
             .args(["capture", "--config"])
             .arg(config)
             .args(["--settle", "0.02", "--seed", "3", "--width"])
-            .arg(W.to_string())
+            .arg(self.width.to_string())
             .args(args)
             .envs(self.env.iter().map(|(k, v)| (k, v)))
             .envs(fault.iter().copied())
@@ -160,7 +197,7 @@ impl Setup {
     }
 }
 
-fn text(out: &Output) -> String {
+pub fn text(out: &Output) -> String {
     format!(
         "stdout:\n{}\nstderr:\n{}",
         String::from_utf8_lossy(&out.stdout),

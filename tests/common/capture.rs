@@ -109,10 +109,16 @@ pub fn stage_lights() -> Vec<TestLight> {
 /// Writes the stage to `dir/scene` and a copy of its basis images to `dir/truth`;
 /// returns the scene folder.
 pub fn stage(dir: &Path) -> PathBuf {
-    let scene = write_scene(&dir.join("scene"), W, H, &["all"], &stage_lights());
+    stage_of(dir, W, H, &stage_lights())
+}
+
+/// Writes a scene of `lights` (`w` x `h`) to `dir/scene` and a copy of its basis images to
+/// `dir/truth`; returns the scene folder.
+pub fn stage_of(dir: &Path, w: usize, h: usize, lights: &[TestLight]) -> PathBuf {
+    let scene = write_scene(&dir.join("scene"), w, h, &["all"], lights);
     let truth = dir.join("truth");
     std::fs::create_dir_all(&truth).expect("mkdir truth");
-    for l in LIGHTS {
+    for l in lights {
         let name = format!("{:03}.exr", l.channel);
         std::fs::copy(scene.join("basis").join(&name), truth.join(&name)).expect("copy truth");
     }
@@ -203,14 +209,25 @@ pub fn alone_at_full(dmx: &[u8], ch: u32) -> bool {
             .all(|l| l.level(dmx) == if l.channel == ch { 255 } else { 0 })
 }
 
-/// Per light 1-5, the median relative error of its captured basis against the truth over
-/// the pixels it lights (luminance above 5% of its brightest), after one scale factor for
-/// all lights together when `up_to_scale`: a JPEG's response is known only up to a scale
-/// (relighting does not care: the scene's `exposure` sets brightness), a raw capture's is
-/// absolute.
+/// Per light 1-5, the median relative error of its captured basis against the truth
+/// ([`errors_of`]).
 pub fn basis_errors(dir: &Path, up_to_scale: bool) -> Vec<f64> {
+    errors_of(dir, 1..=5, up_to_scale)
+}
+
+/// Per light of `channels`, the median relative error of its captured basis
+/// (`dir/scene/basis/NNN.exr`) against the truth (`dir/truth/NNN.exr`) over the pixels it
+/// lights (luminance above 5% of its brightest), after one scale factor for all lights
+/// together when `up_to_scale`: a JPEG's response is known only up to a scale (relighting
+/// does not care: the scene's `exposure` sets brightness), a raw capture's is absolute.
+pub fn errors_of(
+    dir: &Path,
+    channels: impl IntoIterator<Item = u32>,
+    up_to_scale: bool,
+) -> Vec<f64> {
     let lum = |p: &[f32; 3]| 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2];
-    let pairs: Vec<Vec<([f32; 3], [f32; 3])>> = (1..=5)
+    let pairs: Vec<Vec<([f32; 3], [f32; 3])>> = channels
+        .into_iter()
         .map(|ch| {
             let got = read_exr(&dir.join(format!("scene/basis/{ch:03}.exr"))).expect("captured");
             let want = read_exr(&dir.join(format!("truth/{ch:03}.exr"))).expect("truth");

@@ -39,6 +39,8 @@ Environment:
                          number), shot noise of 20,000 electrons at full scale
   FAKE_GPHOTO2_DMX_LOG   a file to which each rig render appends a JSON line: capture
                          number, each universe's 512 slots as hex, each light's level
+  FAKE_GPHOTO2_BODY      `second`: a body built differently from the first in every
+                         step that turns light into a file (below)
 
 Each frame is rendered (render_frame) from the scene scaled by the exposure through a
 simple camera response with clipping, and written as a JPEG whose EXIF holds the
@@ -46,6 +48,27 @@ exposure the shutter really gave: the true 1/3-stop time (1/64 s for `1/60`), no
 rounded label, as a rational ExposureTime; ISOSpeedRatings; FNumber. With the image
 format set to RAW the frame is written as a DNG instead (write_dng: PiDNG, a Bayer mosaic
 of the camera's own RGB with its colour matrix).
+
+The second body (FAKE_GPHOTO2_BODY=second, a "Nikon Z 6_2") shares only the gphoto2
+command line with the first; its pipeline is its own, so that capture is measured on a
+camera it was not tuned on (class SecondBody):
+  exposure   the shutter gives the EXIF time (the 1/3-stop time) times 1 + u, u uniform in
+             +-2% and new for every shot (seeded by FAKE_GPHOTO2_SEED and the capture's
+             number): EXIF is never exactly right, and never the same error twice
+  sensor     its own camera RGB (rows unlike the first body's), 1.0 radiance at 1/64 s,
+             ISO 100, f/8 lands at 12% of full scale; 9,000 electrons at full scale at ISO
+             100 (fewer at higher ISO) with shot noise, 4.5 electrons of read noise, a fixed
+             pattern of 0.5% gain (PRNU) and 1 electron of offset (DSNU) per pixel, the
+             same in every frame (the sensor's own, seeded once)
+  JPEG       the noisy camera RGB back to sRGB through the inverse of its matrix (the
+             noise correlated across channels, as in-camera processing makes it), a black
+             cut at 0.15% of full scale, a log encoding log(1 + 48 x) / log(49), then an
+             S-curve (powers 1.4 below and above a pivot at 0.42: a toe, and a shoulder
+             whose slope falls to 0 at full scale), the same curve on each channel, 8 bits,
+             encoded at quality 90 with 4:2:0 chroma subsampling
+  raw        a GRBG mosaic of the camera RGB, 14 bits with a black level per colour of the
+             2x2 block (1022, 1024, 1025, 1023: BlackLevelRepeatDim) and white level 15520;
+             noise below black is kept (clipped at 0 DN), as a sensor reads it
 """
 
 import json
@@ -60,6 +83,7 @@ SHUTTERS = ["bulb", "30", "25", "20", "15", "13", "10", "8", "6", "5", "4", "3.2
             "1/80", "1/100", "1/125", "1/160", "1/200", "1/250", "1/320", "1/400", "1/500",
             "1/640", "1/800", "1/1000", "1/1250", "1/1600", "1/2000", "1/2500", "1/3200",
             "1/4000"]
+BODY = os.environ.get("FAKE_GPHOTO2_BODY", "first")
 ISOS = ["Auto", "100", "200", "400", "800", "1600", "3200", "6400"]
 APERTURES = ["4", "5.6", "8", "11", "16"]
 FORMATS = ["Large Fine JPEG", "RAW", "RAW + Large Fine JPEG"]
@@ -76,9 +100,10 @@ def default_state():
         aperture = radio("F-Number", "f/8", ["f/" + a for a in APERTURES])
     else:
         aperture = radio("Aperture", "8", list(APERTURES))
+    second = BODY == "second"
     return {
-        "model": "Canon EOS 6D",
-        "port": "usb:001,007",
+        "model": "Nikon Z 6_2" if second else "Canon EOS 6D",
+        "port": "usb:002,004" if second else "usb:001,007",
         "calls": 0,
         "captures": 0,
         "image_number": 0,
@@ -184,28 +209,34 @@ RAW_BLACK, RAW_WHITE = 600, 15000
 SRGB_TO_XYZ = [[0.4124, 0.3576, 0.1805], [0.2126, 0.7152, 0.0722], [0.0193, 0.1192, 0.9505]]
 
 
-def write_dng(name, signal, exposure, iso, f_number, state):
+def mosaic_of(camera, pattern):
+    """The 2x2 Bayer mosaic of camera RGB (HxWx3) for `pattern` (e.g. "RGGB": the colours
+    of the block's top-left, top-right, bottom-left and bottom-right samples), cut to even
+    dimensions."""
+    import numpy as np
+    h, w = camera.shape[0] // 2 * 2, camera.shape[1] // 2 * 2
+    mosaic = np.empty((h, w), dtype=np.float64)
+    for k, colour in enumerate(pattern):
+        dy, dx = divmod(k, 2)
+        c = "RGB".index(colour)
+        mosaic[dy::2, dx::2] = camera[dy:h:2, dx:w:2, c]
+    return mosaic
+
+
+def write_dng(name, raw, pattern, black, white, cam, exposure, iso, f_number, state):
     """An uncompressed 16-bit Bayer DNG written by PiDNG (an independent DNG writer), as
-    a DNG-recording body makes one: the mosaic of the camera's RGB, BlackLevel,
-    WhiteLevel, ColorMatrix1 (XYZ to camera, D65) and the exposure as TIFF-context tags
-    in the main IFD (PiDNG writes no EXIF sub-IFD)."""
+    a DNG-recording body makes one: the mosaic `raw` (uint16 HxW) with its CFA `pattern`,
+    BlackLevel (one value, or four repeating over the 2x2 block), WhiteLevel,
+    ColorMatrix1 (XYZ to camera, D65, from `cam`, the camera's RGB from linear sRGB) and
+    the exposure as TIFF-context tags in the main IFD (PiDNG writes no EXIF sub-IFD)."""
     import numpy as np
     from pidng.core import RAW2DNG, DNGTags, Tag
     from pidng.defs import (CFAPattern, CalibrationIlluminant, DNGVersion, Orientation,
                             PhotometricInterpretation)
-    cam = np.array(CAMERA_RGB, dtype=np.float64)
-    camera = np.clip(signal.astype(np.float64), 0.0, None) @ cam.T
-    h, w = camera.shape[0] // 2 * 2, camera.shape[1] // 2 * 2
-    mosaic = np.empty((h, w), dtype=np.float64)
-    mosaic[0::2, 0::2] = camera[0:h:2, 0:w:2, 0]
-    mosaic[0::2, 1::2] = camera[0:h:2, 1:w:2, 1]
-    mosaic[1::2, 0::2] = camera[1:h:2, 0:w:2, 1]
-    mosaic[1::2, 1::2] = camera[1:h:2, 1:w:2, 2]
-    raw = np.clip(np.round(RAW_BLACK + np.clip(mosaic, 0.0, 1.0) * (RAW_WHITE - RAW_BLACK)),
-                  0, RAW_WHITE).astype(np.uint16)
-    xyz_to_cam = cam @ np.linalg.inv(np.array(SRGB_TO_XYZ))
+    xyz_to_cam = np.array(cam, dtype=np.float64) @ np.linalg.inv(np.array(SRGB_TO_XYZ))
     ccm = [[int(round(v * 10000)), 10000] for v in xyz_to_cam.flatten()]
     fnum = Fraction(f_number).limit_denominator(100)
+    h, w = raw.shape
     t = DNGTags()
     t.set(Tag.ImageWidth, w)
     t.set(Tag.ImageLength, h)
@@ -216,13 +247,15 @@ def write_dng(name, signal, exposure, iso, f_number, state):
     t.set(Tag.SamplesPerPixel, 1)
     t.set(Tag.BitsPerSample, 16)
     t.set(Tag.CFARepeatPatternDim, [2, 2])
-    t.set(Tag.CFAPattern, CFAPattern.RGGB)
-    t.set(Tag.BlackLevel, RAW_BLACK)
-    t.set(Tag.WhiteLevel, RAW_WHITE)
+    t.set(Tag.CFAPattern, getattr(CFAPattern, pattern))
+    if isinstance(black, (list, tuple)):
+        t.set(Tag.BlackLevelRepeatDim, [2, 2])
+    t.set(Tag.BlackLevel, black)
+    t.set(Tag.WhiteLevel, white)
     t.set(Tag.ColorMatrix1, ccm)
     t.set(Tag.CalibrationIlluminant1, CalibrationIlluminant.D65)
     t.set(Tag.AsShotNeutral, [[1, 1], [1, 1], [1, 1]])
-    t.set(Tag.Make, "Canon")
+    t.set(Tag.Make, state["model"].split()[0])
     t.set(Tag.Model, state["model"])
     t.set(Tag.UniqueCameraModel, state["model"])
     t.set(Tag.DNGVersion, DNGVersion.V1_4)
@@ -233,6 +266,112 @@ def write_dng(name, signal, exposure, iso, f_number, state):
     writer.options(t, path="", compress=False)
     with open(name, "wb") as f:
         f.write(writer.convert(raw))
+
+
+class FirstBody:
+    """The first body: sensor_signal and render_frame above, JPEG at quality 95 (4:4:4 as
+    Pillow writes at that quality), an RGGB DNG over one black level."""
+    jpeg_options = {"quality": 95}
+
+    @staticmethod
+    def expose(radiance, exposure, iso, f_number, seed):
+        import numpy as np
+        noise = np.random.default_rng(seed) if seed is not None else None
+        return sensor_signal(radiance, float(exposure), iso, f_number, noise)
+
+    @staticmethod
+    def jpeg(signal):
+        return render_frame(signal)
+
+    @staticmethod
+    def dng(name, signal, exposure, iso, f_number, state):
+        import numpy as np
+        cam = np.array(CAMERA_RGB, dtype=np.float64)
+        camera = np.clip(signal.astype(np.float64), 0.0, None) @ cam.T
+        mosaic = mosaic_of(camera, "RGGB")
+        raw = np.clip(np.round(RAW_BLACK + np.clip(mosaic, 0.0, 1.0) * (RAW_WHITE - RAW_BLACK)),
+                      0, RAW_WHITE).astype(np.uint16)
+        write_dng(name, raw, "RGGB", RAW_BLACK, RAW_WHITE, CAMERA_RGB, exposure, iso, f_number,
+                  state)
+
+
+class SecondBody:
+    """The second body (FAKE_GPHOTO2_BODY=second, see the module's documentation): its own
+    exposure error, sensor, noise, JPEG tone curve and encoding, and raw levels. What
+    `expose` returns is the sensor's camera RGB as a fraction of full scale."""
+    # Rows: camera R, G, B from linear sRGB (unlike the first body's and the sim's).
+    CAMERA_RGB = [[0.62, 0.33, 0.05], [0.08, 0.82, 0.10], [0.02, 0.24, 0.74]]
+    GAIN = 0.12 * 64.0 * 64.0  # 1.0 radiance at 1/64 s, ISO 100, f/8: 12% of full scale
+    FULL_WELL = 9000.0  # electrons at full scale, ISO 100
+    READ_NOISE = 4.5  # electrons
+    PRNU = 0.005  # fixed per-pixel gain spread
+    DSNU = 1.0  # fixed per-pixel offset spread, electrons
+    EXPOSURE_ERROR = 0.02  # the shutter's time is EXIF's times 1 + U(-2%, +2%)
+    BLACK_CUT = 0.0015
+    LOG_A = 48.0
+    PIVOT = 0.42
+    CONTRAST = 1.4
+    RAW_BLACK = [1022, 1024, 1025, 1023]  # per sample of the 2x2 block
+    RAW_WHITE = 15520
+    PATTERN = "GRBG"
+    jpeg_options = {"quality": 90, "subsampling": 2}  # 2: 4:2:0
+
+    @classmethod
+    def expose(cls, radiance, exposure, iso, f_number, seed):
+        """The noisy camera RGB of `radiance` (linear sRGB) for the EXIF `exposure`: the
+        shutter's true time is off by up to 2%, new each shot."""
+        import numpy as np
+        seed = 1 if seed is None else seed
+        actual = float(exposure) * (1.0 + np.random.default_rng([seed, 2]).uniform(
+            -cls.EXPOSURE_ERROR, cls.EXPOSURE_ERROR))
+        cam = np.array(cls.CAMERA_RGB, dtype=np.float64)
+        camera = radiance.astype(np.float64) @ cam.T
+        camera *= actual * (iso / 100.0) / (f_number * f_number) * cls.GAIN
+        electrons = cls.FULL_WELL * 100.0 / iso
+        fixed = np.random.default_rng(20240611)  # the sensor's own patterns
+        prnu = 1.0 + cls.PRNU * fixed.standard_normal(camera.shape)
+        dsnu = cls.DSNU * fixed.standard_normal(camera.shape)
+        noise = np.random.default_rng([seed, 1])
+        e = np.clip(camera * prnu, 0.0, None) * electrons
+        e = (e + np.sqrt(e) * noise.standard_normal(e.shape)
+             + cls.READ_NOISE * noise.standard_normal(e.shape) + dsnu)
+        return e / electrons
+
+    @classmethod
+    def tone(cls, x):
+        """The tone curve, linear (full scale 1) to 0..1, applied to each channel alike (a
+        neutral stays neutral at every level, as in a camera's JPEG): a black cut, a log
+        encoding, an S-curve about PIVOT."""
+        import numpy as np
+        x = np.clip((x - cls.BLACK_CUT) / (1.0 - cls.BLACK_CUT), 0.0, 1.0)
+        y = np.log1p(cls.LOG_A * x) / np.log1p(cls.LOG_A)
+        k, p = cls.CONTRAST, cls.PIVOT
+        low = p * (np.minimum(y, p) / p) ** k
+        high = 1.0 - (1.0 - p) * ((1.0 - np.maximum(y, p)) / (1.0 - p)) ** k
+        return np.where(y < p, low, high)
+
+    @classmethod
+    def jpeg(cls, camera):
+        import numpy as np
+        srgb = camera @ np.linalg.inv(np.array(cls.CAMERA_RGB, dtype=np.float64)).T
+        return np.round(cls.tone(srgb) * 255.0).astype(np.uint8)
+
+    @classmethod
+    def dng(cls, name, camera, exposure, iso, f_number, state):
+        import numpy as np
+        mosaic = mosaic_of(camera, cls.PATTERN)
+        black = np.empty(mosaic.shape)
+        for k, b in enumerate(cls.RAW_BLACK):
+            dy, dx = divmod(k, 2)
+            black[dy::2, dx::2] = b
+        span = cls.RAW_WHITE - max(cls.RAW_BLACK)
+        raw = np.clip(np.round(black + mosaic * span), 0, cls.RAW_WHITE).astype(np.uint16)
+        write_dng(name, raw, cls.PATTERN, cls.RAW_BLACK, cls.RAW_WHITE, cls.CAMERA_RGB,
+                  exposure, iso, f_number, state)
+
+
+def body():
+    return SecondBody if BODY == "second" else FirstBody
 
 
 def parse_sacn(p):
@@ -327,7 +466,7 @@ def exif_bytes(state, exposure, iso, f_number):
     fnum = Fraction(f_number).limit_denominator(100)
     return piexif.dump({
         "0th": {
-            piexif.ImageIFD.Make: b"Canon",
+            piexif.ImageIFD.Make: state["model"].split()[0].encode(),
             piexif.ImageIFD.Model: state["model"].encode(),
         },
         "Exif": {
@@ -404,19 +543,20 @@ def capture(state, filename, force):
     aperture = config.get("aperture") or config.get("f-number")
     f_number = float(aperture["current"].replace("f/", ""))
 
+    cam = body()
     from_rig = rig_frame(state)
+    seed = int(os.environ.get("FAKE_GPHOTO2_SEED", "1")) + state["captures"]
     if from_rig:
         radiance, levels = from_rig
         if hangs_when_lit(levels):
             hang()
-        seed = int(os.environ.get("FAKE_GPHOTO2_SEED", "1")) + state["captures"]
-        noise = np.random.default_rng(seed)
-        signal = sensor_signal(radiance, float(exposure), iso, f_number, noise)
     else:
         scene_path = os.environ.get("FAKE_GPHOTO2_SCENE")
         radiance = np.load(scene_path).astype(np.float32) if scene_path else default_scene()
-        signal = sensor_signal(radiance, float(exposure), iso, f_number)
-    image = Image.fromarray(render_frame(signal), "RGB")
+        if cam is FirstBody:
+            seed = None  # the first body renders a scene without noise
+    signal = cam.expose(radiance, exposure, iso, f_number, seed)
+    image = Image.fromarray(cam.jpeg(signal), "RGB")
     exif = exif_bytes(state, exposure, iso, f_number)
 
     fmt = config["imageformat"]["current"]
@@ -434,9 +574,9 @@ def capture(state, filename, force):
                 continue
         print("Saving file as %s" % name)
         if suffix == "JPG":
-            image.save(name, "JPEG", quality=95, exif=exif)
+            image.save(name, "JPEG", exif=exif, **cam.jpeg_options)
         else:
-            write_dng(name, signal, exposure, iso, f_number, state)
+            cam.dng(name, signal, exposure, iso, f_number, state)
         print("Deleting file %s on the camera" % on_camera)
 
 

@@ -661,7 +661,7 @@ impl Session<'_> {
     }
 
     /// Shows `look`, meters, shoots the bracket the metering frame proposes and merges
-    /// it. For the ambient light (`dark`: everything at 0, where a proposal from noise
+    /// it with the metering frame. For the ambient light (`dark`: everything at 0, where a proposal from noise
     /// means nothing), and for a light whose metering frame stays dark at the longest
     /// exposure, the bracket is the metered exposure and two and four stops below it, so
     /// a light that adds nothing is merged exactly as the ambient was and compares with it
@@ -696,10 +696,14 @@ impl Session<'_> {
         times.dedup();
         self.progress
             .step(&format!("bracket of {} frames", times.len()));
-        let mut shots = Vec::with_capacity(times.len());
+        let mut shots = Vec::with_capacity(times.len() + 1);
         for t in times {
             shots.push(self.shoot(&self.nearest(t))?);
         }
+        // The metering frame shows the same look: merged too, it adds its noise and its
+        // EXIF error to the merge's averages (a light's scale rests on the mean of its
+        // frames' EXIF times) at no cost.
+        shots.push(meter);
         let frames: Vec<_> = shots.iter().map(decode::DecodedShot::frame).collect();
         let settings = MergeSettings {
             width: Some(self.opts.width),

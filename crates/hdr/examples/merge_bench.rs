@@ -60,7 +60,7 @@ fn main() {
     std::hint::black_box(&recovered);
     // A stand-in response (the true one; recovery is not part of the per-light merge).
     let response = Response {
-        curves: std::array::from_fn(|c| (0..=255u8).map(|z| true_g(c, z) as f32).collect()),
+        curves: std::array::from_fn(|_| (0..=255u8).map(|z| true_g(z) as f32).collect()),
     };
     time("raw  7 x 24 MP -> 480 px", || {
         merge(&raw_frames, None, &settings).expect("merge")

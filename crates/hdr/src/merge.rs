@@ -23,6 +23,13 @@ pub struct MergeSettings {
     /// JPEG: a pixel with any channel at or above this code is clipped in that frame (the
     /// tone curve's shoulder and JPEG ringing make the last codes unreliable).
     pub jpeg_clip: u8,
+    /// JPEG noise model, shot noise: the electrons a sample at full scale holds. The
+    /// camera's own figure is unknown; any value in the thousands to tens of thousands
+    /// makes shot noise dominate wherever the tone curve is not flat, which is what the
+    /// weights need to know (see [`merge`]).
+    pub jpeg_electrons: f32,
+    /// JPEG noise model, the code's own error in codes (rounding, 0.29, and compression).
+    pub jpeg_code_noise: f32,
     /// Refit the frames' exposure ratios from the pixels (EXIF times can be off by a few
     /// percent). Off: the EXIF values are used as they are.
     pub fit_exposures: bool,
@@ -40,6 +47,8 @@ impl Default for MergeSettings {
             raw_floor: 0.002,
             jpeg_black: 3,
             jpeg_clip: 250,
+            jpeg_electrons: 10_000.0,
+            jpeg_code_noise: 0.5,
             fit_exposures: true,
             fit_window: [0.01, 0.85],
             min_fit_samples: 1000,
@@ -52,8 +61,9 @@ impl Default for MergeSettings {
 pub struct ExposureFit {
     /// Relative exposure from EXIF (`t * ISO / N^2`).
     pub nominal: f64,
-    /// Relative exposure the merge used (the reference frame keeps its EXIF value, so
-    /// every frame's fitted exposure is on the EXIF scale).
+    /// Relative exposure the merge used: the fitted ratios on the EXIF scale, their
+    /// geometric mean that of the EXIF exposures (an EXIF error of one frame is shared out
+    /// over the bracket instead of setting the whole light's scale).
     pub fitted: f64,
     /// `nominal / nominal(reference)`.
     pub nominal_ratio: f64,
@@ -95,8 +105,8 @@ enum Lin<'a> {
         codes: &'a [u8],
         /// Per channel `w(z) * t * g(z)` (numerator) for this frame's fitted `t`.
         num: Box<[[f32; 256]; 3]>,
-        /// `w(z) * t^2` (denominator).
-        den: Box<[f32; 256]>,
+        /// Per channel `w(z) * t^2` (denominator).
+        den: Box<[[f32; 256]; 3]>,
         /// The response, `g[channel][code]`.
         g: Box<[[f32; 256]; 3]>,
         clip: u8,
@@ -108,9 +118,14 @@ enum Lin<'a> {
 ///
 /// Per pixel and channel: radiance = sum(w * value / t) / sum(w) over the frames where the
 /// pixel is unclipped in every channel and the channel is above the noise floor, with
-/// inverse-variance weights: raw `w = t` (shot noise; the estimate becomes
-/// sum(value) / sum(t)); JPEG `w = hat(code) * t^2` (Robertson's). A channel seen in no
-/// frame above the floor takes the longest unclipped frame's value; a pixel clipped in
+/// inverse-variance weights `w = t^2 / var(value)`: raw, shot noise (`var` proportional to
+/// the value, so `w` to `t` and the estimate is sum(value) / sum(t)); JPEG, the variance
+/// of the linear value a code stands for, `g'(z)^2 s^2 + g(z) / N` (the code's own error
+/// through the curve's slope, and shot noise; [`jpeg_variance`]). Shot noise dominates
+/// where the curve is steep in codes, so a pixel's frames weigh about as `t` there, as in
+/// raw; on a shoulder or a toe, where a code spans a wide range of values (and the
+/// recovered curve is least certain), the slope takes the weight away. A channel seen in
+/// no frame above the floor takes the longest unclipped frame's value; a pixel clipped in
 /// every frame takes the shortest frame's value and is counted.
 pub fn merge(
     frames: &[BracketFrame<'_>],
@@ -219,16 +234,22 @@ fn lin<'a>(
             }
         }
         Pixels::Jpeg(codes) => {
-            let g = response.map(|r| &r.curves);
-            let hat = jpeg_weights(s);
+            let lin = Response::linear();
+            let g = &response.unwrap_or(&lin).curves;
             let mut num = Box::new([[0.0f32; 256]; 3]);
-            let mut den = Box::new([0.0f32; 256]);
+            let mut den = Box::new([[0.0f32; 256]; 3]);
             let mut gt = Box::new([[0.0f32; 256]; 3]);
-            for z in 0..256 {
-                den[z] = (hat[z] * t * t) as f32;
-                for c in 0..3 {
-                    gt[c][z] = g.map_or(z as f32 / 255.0, |g| g[c][z]);
-                    num[c][z] = (hat[z] * t) as f32 * gt[c][z];
+            for c in 0..3 {
+                let var = jpeg_variance(&g[c], s);
+                for z in 0..256 {
+                    let w = if var[z] > 0.0 {
+                        f64::from(var[z]).recip()
+                    } else {
+                        0.0
+                    };
+                    gt[c][z] = g[c][z];
+                    den[c][z] = (w * t * t) as f32;
+                    num[c][z] = (w * t) as f32 * g[c][z];
                 }
             }
             Lin::Jpeg {
@@ -242,17 +263,20 @@ fn lin<'a>(
     }
 }
 
-/// The JPEG hat: 0 at and below `jpeg_black` and at and above `jpeg_clip`, 1 midway.
-fn jpeg_weights(s: &MergeSettings) -> [f64; 256] {
-    let (lo, hi) = (f64::from(s.jpeg_black), f64::from(s.jpeg_clip));
-    let mid = (lo + hi) / 2.0;
+/// The variance of the linear value (fraction of full scale) each code of curve `g` stands
+/// for: `g'(z)^2 s^2 + g(z) / N`, the code's own error (`s` codes: rounding and
+/// compression) through the curve's slope, and shot noise (`N` electrons at full scale);
+/// 0 (no weight) for the near-black codes and the clipped ones. The slope is the curve's
+/// central difference: the recovered curve is smooth.
+fn jpeg_variance(g: &[f32], s: &MergeSettings) -> [f32; 256] {
+    let (sigma2, electrons) = (s.jpeg_code_noise.powi(2), s.jpeg_electrons.max(1.0));
     std::array::from_fn(|z| {
-        let z = z as f64;
-        if z <= lo || z >= hi {
-            0.0
-        } else {
-            1.0 - (z - mid).abs() / (mid - lo)
+        if z <= usize::from(s.jpeg_black) || z >= usize::from(s.jpeg_clip) || z >= g.len() {
+            return 0.0;
         }
+        let (lo, hi) = (z - 1, (z + 1).min(g.len() - 1));
+        let slope = (g[hi] - g[lo]) / (hi - lo) as f32;
+        (slope * slope * sigma2 + g[z].max(0.0) / electrons).max(f32::MIN_POSITIVE)
     })
 }
 
@@ -307,7 +331,7 @@ fn merge_row(lins: &[(Lin<'_>, f32)], y: usize, w: usize, out: &mut [[f32; 3]]) 
                     for c in 0..3 {
                         let z = usize::from(s[c]);
                         num[c] += nl[c][z];
-                        den[c] += dl[z];
+                        den[c] += dl[c][z];
                     }
                     longest = Some(([0, 1, 2].map(|c| g[c][usize::from(s[c])]), *t));
                 }
@@ -347,8 +371,10 @@ fn shortest_value(l: &Lin<'_>, i: usize) -> [f32; 3] {
 }
 
 /// Fits every frame's relative exposure from the pixels: the ratio between neighbours in
-/// exposure order from the samples both see well (ratio of sums after a median-based
-/// outlier cut), chained outward from the reference frame, which keeps its EXIF value.
+/// exposure order from the samples both see well ([`pair_ratio`]), chained, then put on
+/// the EXIF scale with the fitted exposures' geometric mean equal to the EXIF ones': each
+/// EXIF time is off by its own few percent, and the mean over the bracket is off by less
+/// than any one of them.
 fn fit_exposures(
     frames: &[BracketFrame<'_>],
     response: Option<&Response>,
@@ -377,40 +403,67 @@ fn fit_exposures(
     if let Some(&(_, m)) = ratios.first() {
         samples[order[0]] = m;
     }
-    let reference = order[n / 2];
-    samples[reference] = 0;
-    let scale = nominal[reference] / chained[reference];
+    samples[order[n / 2]] = 0;
+    let log_scale = nominal
+        .iter()
+        .zip(&chained)
+        .map(|(e, c)| (e / c).ln())
+        .sum::<f64>()
+        / n as f64;
+    let scale = log_scale.exp();
     (chained.iter().map(|c| c * scale).collect(), samples)
 }
 
-/// Linear value (fraction of full scale) of sample `i` of a frame, and whether its pixel
-/// is clipped.
-fn sample(
-    f: &BracketFrame<'_>,
-    response: Option<&Response>,
-    s: &MergeSettings,
-    p: usize,
-) -> Option<[f32; 3]> {
-    match f.pixels {
-        Pixels::Raw {
-            values,
-            black,
-            white,
-        } => {
-            let v = &values[p * 3..p * 3 + 3];
-            if v.iter().any(|&x| x >= white) {
-                return None;
+/// A frame as the ratio fit reads it: each sample's linear value and its variance.
+struct FitFrame<'a> {
+    frame: &'a BracketFrame<'a>,
+    response: Option<&'a Response>,
+    /// JPEG: per channel, the variance of each code's linear value ([`jpeg_variance`]).
+    var: Option<Box<[[f32; 256]; 3]>>,
+}
+
+impl<'a> FitFrame<'a> {
+    fn new(frame: &'a BracketFrame<'a>, response: Option<&'a Response>, s: &MergeSettings) -> Self {
+        let var = match (frame.pixels, response) {
+            (Pixels::Jpeg(_), Some(r)) => {
+                Some(Box::new([0, 1, 2].map(|c| jpeg_variance(&r.curves[c], s))))
             }
-            let range = f32::from(white) - f32::from(black);
-            Some([0, 1, 2].map(|c| (f32::from(v[c]) - f32::from(black)) / range))
+            _ => None,
+        };
+        FitFrame {
+            frame,
+            response,
+            var,
         }
-        Pixels::Jpeg(codes) => {
-            let v = &codes[p * 3..p * 3 + 3];
-            if v.iter().any(|&x| x >= s.jpeg_clip) {
-                return None;
+    }
+
+    /// Pixel `p`'s linear values (fractions of full scale) and their variances (raw: the
+    /// value, shot noise up to a factor the pair shares); None when the pixel is clipped.
+    fn sample(&self, s: &MergeSettings, p: usize) -> Option<[(f32, f32); 3]> {
+        match self.frame.pixels {
+            Pixels::Raw {
+                values,
+                black,
+                white,
+            } => {
+                let v = &values[p * 3..p * 3 + 3];
+                if v.iter().any(|&x| x >= white) {
+                    return None;
+                }
+                let range = f32::from(white) - f32::from(black);
+                Some([0, 1, 2].map(|c| {
+                    let x = (f32::from(v[c]) - f32::from(black)) / range;
+                    (x, x.max(0.0))
+                }))
             }
-            let r = response?;
-            Some([0, 1, 2].map(|c| r.linearise(c, v[c])))
+            Pixels::Jpeg(codes) => {
+                let v = &codes[p * 3..p * 3 + 3];
+                if v.iter().any(|&x| x >= s.jpeg_clip) {
+                    return None;
+                }
+                let (r, var) = (self.response?, self.var.as_deref()?);
+                Some([0, 1, 2].map(|c| (r.linearise(c, v[c]), var[c][usize::from(v[c])])))
+            }
         }
     }
 }
@@ -418,7 +471,12 @@ fn sample(
 /// Samples taken per pair for the ratio fit (every k-th pixel), plenty for a 0.1% fit.
 const FIT_PIXELS: usize = 300_000;
 
-/// exposure(b) / exposure(a) from pixels both frames see well, and the samples used.
+/// exposure(b) / exposure(a) from pixels both frames see well, and the samples used: the
+/// samples inside `fit_window` in both frames (and, for JPEG, on codes the merge weighs),
+/// those off the median ratio by more than 20% dropped (movement, flicker), then the
+/// ratio `r` minimising `sum (b - r a)^2 / (var b + r^2 var a)` (weighted least squares
+/// with each sample's noise, [`FitFrame::sample`]: the codes of a shoulder or a toe,
+/// where the curve is least certain, count little; for raw it is the ratio of the sums).
 fn pair_ratio(
     a: &BracketFrame<'_>,
     b: &BracketFrame<'_>,
@@ -429,33 +487,44 @@ fn pair_ratio(
     // An odd stride so the samples do not line up in columns.
     let step = (n_px / FIT_PIXELS).max(1) | 1;
     let [lo, hi] = s.fit_window;
-    let mut pairs: Vec<(f32, f32)> = Vec::with_capacity(3 * n_px / step + 3);
+    let (fa, fb) = (FitFrame::new(a, response, s), FitFrame::new(b, response, s));
+    // (value in a, its variance, value in b, its variance)
+    let mut pairs: Vec<[f32; 4]> = Vec::with_capacity(3 * n_px / step + 3);
     for p in (0..n_px).step_by(step) {
-        let (Some(va), Some(vb)) = (sample(a, response, s, p), sample(b, response, s, p)) else {
+        let (Some(va), Some(vb)) = (fa.sample(s, p), fb.sample(s, p)) else {
             continue;
         };
         for c in 0..3 {
-            let ok = |v: f32| v >= lo && v <= hi;
+            let ok = |(v, var): (f32, f32)| v >= lo && v <= hi && var > 0.0;
             if ok(va[c]) && ok(vb[c]) {
-                pairs.push((va[c], vb[c]));
+                pairs.push([va[c].0, va[c].1, vb[c].0, vb[c].1]);
             }
         }
     }
     if pairs.is_empty() {
         return None;
     }
-    let mut r: Vec<f32> = pairs.iter().map(|(x, y)| y / x).collect();
+    let mut r: Vec<f32> = pairs.iter().map(|p| p[2] / p[0]).collect();
     let mid = r.len() / 2;
     let median = *r.select_nth_unstable_by(mid, f32::total_cmp).1;
-    // Drop pixels that changed between frames (movement, flicker): off the median by >20%.
-    let (mut sa, mut sb, mut k) = (0.0f64, 0.0f64, 0usize);
-    for &(x, y) in &pairs {
-        let q = y / x;
-        if q > median / 1.2 && q < median * 1.2 {
-            sa += f64::from(x);
-            sb += f64::from(y);
-            k += 1;
-        }
+    pairs.retain(|p| {
+        let q = p[2] / p[0];
+        q > median / 1.2 && q < median * 1.2
+    });
+    if pairs.is_empty() {
+        return None;
     }
-    (k > 0).then(|| (sb / sa, k))
+    // The weights depend on the ratio: two rounds from the median are plenty.
+    let mut ratio = f64::from(median);
+    for _ in 0..2 {
+        let (mut ab, mut aa) = (0.0f64, 0.0f64);
+        for &[x, vx, y, vy] in &pairs {
+            let (x, y) = (f64::from(x), f64::from(y));
+            let w = 1.0 / (f64::from(vy) + ratio * ratio * f64::from(vx));
+            ab += w * x * y;
+            aa += w * x * x;
+        }
+        ratio = ab / aa;
+    }
+    (ratio.is_finite() && ratio > 0.0).then_some((ratio, pairs.len()))
 }

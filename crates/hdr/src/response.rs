@@ -14,7 +14,8 @@ use crate::frame::{Pixels, check_bracket};
 use crate::{BracketFrame, HdrError};
 
 /// The camera's inverse response `g`: for each channel, JPEG code 0..=255 to linear value,
-/// normalised so `g(255) = 1` (full scale). Non-decreasing.
+/// the channels equal at code 128 and the brightest channel's `g(255)` 1 (about full
+/// scale). Non-decreasing.
 ///
 /// Recovered once per session and stored in `capture.json` (it is serde), so a resumed
 /// capture linearises with the same curve and its basis images stay comparable.
@@ -105,7 +106,7 @@ impl Response {
             }
         }
         let positions: Vec<usize> = bins.into_iter().flatten().collect();
-        let mut curves: [Vec<f32>; 3] = Default::default();
+        let mut curves: [Vec<f64>; 3] = Default::default();
         for (c, curve) in curves.iter_mut().enumerate() {
             let z: Vec<u8> = positions
                 .iter()
@@ -113,7 +114,18 @@ impl Response {
                 .collect();
             *curve = debevec(&z, nf, &rel, LAMBDA)?;
         }
-        Ok(Response { curves })
+        // The channels are tied where each curve is best known, at code 128 (the solve's
+        // own anchor): a camera's JPEG keeps a neutral grey neutral, its white balance
+        // and its tone curve the same on every channel. Not at 255, which stands for
+        // everything above the top of the range, so no sample pins it and each channel's
+        // value there is the smoothness term's extrapolation: tying the channels there
+        // tinted a camera with a flat shoulder by a few percent. One factor for all then
+        // puts the brightest channel's 255 at 1 (each curve is finite, non-decreasing and 1
+        // at 128, so `full` is at least 1).
+        let full = curves.iter().map(|c| c[255]).fold(1.0f64, f64::max);
+        Ok(Response {
+            curves: curves.map(|c| c.iter().map(|&v| (v / full) as f32).collect()),
+        })
     }
 
     /// Checks a stored response (256 finite, non-decreasing entries per channel, full scale
@@ -150,10 +162,10 @@ impl Response {
 /// (`ln E_i` = the weighted mean of `g(z_ij) - ln t_j`), which leaves a dense symmetric
 /// positive definite system of 255 + `nf` unknowns, solved by Cholesky.
 ///
-/// Then back to the crate's form: `exp(g)`, code 0 extrapolated, a running max (the
+/// Then back to linear: `exp(g)` (1 at code 128), code 0 extrapolated, a running max (the
 /// smoothness keeps the solved curve increasing wherever samples are plentiful; the running
-/// max only guards the sparse ends), divided by its value at 255.
-fn debevec(z: &[u8], nf: usize, t: &[f64], lambda: f64) -> Result<Vec<f32>, HdrError> {
+/// max only guards the sparse ends).
+fn debevec(z: &[u8], nf: usize, t: &[f64], lambda: f64) -> Result<Vec<f64>, HdrError> {
     let n = z.len() / nf;
     let w: Vec<f64> = (0..=255u8).map(weight).collect();
     let lt: Vec<f64> = t.iter().map(|v| v.ln()).collect();
@@ -265,20 +277,18 @@ fn debevec(z: &[u8], nf: usize, t: &[f64], lambda: f64) -> Result<Vec<f32>, HdrE
     g[128] = 1.0;
     // Code 0 holds everything below the sensor's range: extrapolate it linearly (in linear
     // units) from its neighbours, towards 0. Then make the curve non-decreasing (a running
-    // max; the smoothness term already keeps it so wherever samples are plentiful) and
-    // full scale 1.
+    // max; the smoothness term already keeps it so wherever samples are plentiful).
     g[0] = (2.0 * g[1] - g[2]).clamp(0.0, g[1]);
     for v in 1..256 {
         g[v] = g[v].max(g[v - 1]);
     }
-    let full = g[255];
-    if !(full.is_finite() && full > 0.0) {
+    if !g.iter().all(|v| v.is_finite()) {
         return Err(HdrError::TooFewSamples {
             got: usable.len(),
             need: MIN_SAMPLES,
         });
     }
-    Ok(g.iter().map(|&v| (v / full) as f32).collect())
+    Ok(g)
 }
 
 /// Solves `a x = y` in place for a symmetric positive definite `m x m` matrix `a` (row

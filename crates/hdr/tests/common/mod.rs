@@ -80,19 +80,20 @@ pub fn raw_frame(map: &[[f32; 3]], w: usize, t: f64, seed: u64) -> Vec<u16> {
     out
 }
 
-/// The JPEG camera's true tone curve per channel: a filmic shoulder then a gamma.
-pub const GAMMAS: [f64; 3] = [2.2, 2.0, 2.4];
+/// The JPEG camera's true tone curve: a filmic shoulder then a gamma, the same on every
+/// channel (a camera's JPEG keeps a neutral neutral at every level).
+pub const GAMMA: f64 = 2.2;
 const SHOULDER: f64 = 0.3;
 
-pub fn tone(c: usize, x: f64) -> f64 {
+pub fn tone(x: f64) -> f64 {
     let x = x.clamp(0.0, 1.0);
     let s = x * (1.0 + SHOULDER) / (x + SHOULDER);
-    s.powf(1.0 / GAMMAS[c])
+    s.powf(1.0 / GAMMA)
 }
 
 /// The true inverse response (code -> linear, full scale 1).
-pub fn true_g(c: usize, z: u8) -> f64 {
-    let y = (f64::from(z) / 255.0).powf(GAMMAS[c]);
+pub fn true_g(z: u8) -> f64 {
+    let y = (f64::from(z) / 255.0).powf(GAMMA);
     SHOULDER * y / (1.0 + SHOULDER - y)
 }
 
@@ -101,8 +102,8 @@ pub fn jpeg_frame(map: &[[f32; 3]], w: usize, t: f64, seed: u64) -> Vec<u8> {
     let mut out = vec![0u8; map.len() * 3];
     // The curve as a table over linear values (fast for 24 MP).
     const N: usize = 1 << 16;
-    let lut: Vec<[u8; 3]> = (0..=N)
-        .map(|i| [0, 1, 2].map(|c| (255.0 * tone(c, i as f64 / N as f64)).round() as u8))
+    let lut: Vec<u8> = (0..=N)
+        .map(|i| (255.0 * tone(i as f64 / N as f64)).round() as u8)
         .collect();
     out.par_chunks_mut(w * 3).enumerate().for_each(|(y, row)| {
         let mut rng = Rng::seed_from_u64(seed.wrapping_mul(999_983).wrapping_add(y as u64));
@@ -112,7 +113,7 @@ pub fn jpeg_frame(map: &[[f32; 3]], w: usize, t: f64, seed: u64) -> Vec<u8> {
                 let e = f64::from(p[c]) * t;
                 let n: f64 = StandardNormal.sample(&mut rng);
                 let v = (e + (e * 2e-5).sqrt() * n).clamp(0.0, 1.0);
-                *out = lut[(v * N as f64).round() as usize][c];
+                *out = lut[(v * N as f64).round() as usize];
             }
         }
     });
