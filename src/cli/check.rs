@@ -249,6 +249,71 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             out.fade_s
         ),
     );
+    let list = |numbers: Vec<u16>| {
+        numbers
+            .iter()
+            .map(u16::to_string)
+            .collect::<Vec<_>>()
+            .join(" ")
+    };
+    let universes = || list(patch.universes().to_vec());
+    for d in &out.sacn {
+        let to = if d.destination == "multicast" {
+            "multicast (239.255.hi.lo per universe)".to_string()
+        } else {
+            d.destination.clone()
+        };
+        line(
+            "sacn",
+            format!(
+                "to {to} port {}, universes {}, priority {}, from {}",
+                d.port,
+                universes(),
+                d.priority,
+                d.bind
+            ),
+        );
+    }
+    for d in &out.artnet {
+        line(
+            "artnet",
+            format!(
+                "to {}{} port {}, universes {} as port-addresses {}, from {}",
+                d.destination,
+                if d.discover {
+                    " (nodes that answer its polls)"
+                } else {
+                    ""
+                },
+                d.port,
+                universes(),
+                list(
+                    patch
+                        .universes()
+                        .iter()
+                        .filter_map(|&u| d.port_address(u))
+                        .collect()
+                ),
+                d.bind
+            ),
+        );
+    }
+    if !config.http.listen.is_empty() && config.http.password.is_empty() {
+        let loopback = config
+            .http
+            .listen
+            .parse::<std::net::SocketAddr>()
+            .is_ok_and(|a| a.ip().is_loopback());
+        if !loopback {
+            line(
+                "warning",
+                format!(
+                    "the web page on {} has no password: anyone on the allow-listed networks can change the stage (set [http] password)",
+                    config.http.listen
+                ),
+            );
+        }
+    }
     Ok(())
 }
 

@@ -105,7 +105,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .sacn
         .as_ref()
         .zip(input_socket)
-        .map(|(c, socket)| Input::start(c, socket, output.cid()))
+        .map(|(c, socket)| {
+            let allow = config.input_allow_list();
+            let permits = Box::new(move |ip| crate::config::permits(&allow, ip));
+            Input::start(c, socket, output.cid(), permits)
+        })
         .transpose()
         .map_err(|e| anyhow::anyhow!("{}: {e}", config.path.display()))?;
 

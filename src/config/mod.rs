@@ -271,6 +271,11 @@ impl Config {
             .map(|a| Cidr::parse(a).map_err(|e| at(format!("osc.allow: {e}"))))
             .collect::<Result<Vec<_>, _>>()?;
         validate_peers(&file.osc.peer, &allow).map_err(at)?;
+        if let Some(list) = file.input.sacn.as_ref().and_then(|s| s.allow.as_ref()) {
+            for a in list {
+                Cidr::parse(a).map_err(|e| at(format!("input.sacn.allow: {e}")))?;
+            }
+        }
         let g = &file.generate;
         let checks = [
             (
@@ -358,12 +363,22 @@ impl Config {
 
     /// The allow-list, parsed (validated at load).
     pub fn allow_list(&self) -> Vec<Cidr> {
-        self.osc
-            .allow
-            .iter()
-            .filter_map(|a| Cidr::parse(a).ok())
-            .collect()
+        parse_list(&self.osc.allow)
     }
+
+    /// Who may feed the sACN input: `[input.sacn] allow`, else the OSC allow-list, with the
+    /// same rule (empty: loopback only).
+    pub fn input_allow_list(&self) -> Vec<Cidr> {
+        match self.input.sacn.as_ref().and_then(|s| s.allow.as_ref()) {
+            Some(list) => parse_list(list),
+            None => self.allow_list(),
+        }
+    }
+}
+
+/// A list validated at load, parsed.
+fn parse_list(list: &[String]) -> Vec<Cidr> {
+    list.iter().filter_map(|a| Cidr::parse(a).ok()).collect()
 }
 
 /// Whether `ip` may talk to the daemon: on `allow` (addresses or CIDR blocks), or on

@@ -506,7 +506,9 @@ fn check_fits_a_small_screen_and_names_the_web_gallery_and_console() {
         format!(
             "scene = \"scene\"\n[osc]\nallow = [{}]\n[http]\nlisten = \"127.0.0.1:8080\"\n\
              [eos]\naddress = \"10.101.0.5:3032\"\nprotocol = \"tcp-slip\"\n\
-             [input.sacn]\nbind = \"127.0.0.1:5568\"\nuniverses = [7]\n",
+             [input.sacn]\nbind = \"127.0.0.1:5568\"\nuniverses = [7]\n\
+             [[output.sacn]]\ndestination = \"multicast\"\npriority = 120\n\
+             [[output.artnet]]\ndestination = \"10.101.0.255\"\nuniverse_offset = -1\n",
             allow.join(", ")
         ),
     )
@@ -514,6 +516,22 @@ fn check_fits_a_small_screen_and_names_the_web_gallery_and_console() {
     let out = run(&["check", "--config", s(&config)]);
     succeeded(&out);
     let text = String::from_utf8_lossy(&out.stdout);
+    let words = text.split_whitespace().collect::<Vec<_>>().join(" ");
+    // Where each output sends, and which universes.
+    assert!(
+        words.contains(
+            "sacn to multicast (239.255.hi.lo per universe) port 5568, universes 1, priority 120"
+        ),
+        "{text}"
+    );
+    assert!(
+        words.contains("artnet to 10.101.0.255 port 6454, universes 1 as port-addresses 0"),
+        "{text}"
+    );
+    assert!(
+        !text.contains("no password"),
+        "a loopback page needs none: {text}"
+    );
     assert!(
         text.contains("http     web gallery on http://127.0.0.1:8080/"),
         "{text}"
@@ -532,5 +550,20 @@ fn check_fits_a_small_screen_and_names_the_web_gallery_and_console() {
     for line in text.lines().filter(|l| !l.contains(dir.to_str().unwrap())) {
         assert!(line.len() < 80, "{line:?} is {} columns", line.len());
     }
+    // A page on every interface without a password is said.
+    let booth = std::fs::read_to_string(&config)
+        .unwrap()
+        .replace("127.0.0.1:8080", "0.0.0.0:8080");
+    std::fs::write(&config, booth).unwrap();
+    let out = run(&["check", "--config", s(&config)]);
+    succeeded(&out);
+    let words = String::from_utf8_lossy(&out.stdout)
+        .split_whitespace()
+        .collect::<Vec<_>>()
+        .join(" ");
+    assert!(
+        words.contains("the web page on 0.0.0.0:8080 has no password"),
+        "{words}"
+    );
     let _ = std::fs::remove_dir_all(dir);
 }

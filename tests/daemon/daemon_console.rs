@@ -53,12 +53,23 @@ struct Console {
 
 impl Console {
     fn start(to: SocketAddr, id: u8, name: &'static str, show: Show) -> Console {
+        Console::start_from(LOCALHOST, to, id, name, show)
+    }
+
+    /// [`Console::start`] sending from `from` (any loopback address).
+    fn start_from(
+        from: std::net::IpAddr,
+        to: SocketAddr,
+        id: u8,
+        name: &'static str,
+        show: Show,
+    ) -> Console {
         let cid = [id; 16];
         let show = Arc::new(Mutex::new(show));
         let sent = Arc::new(AtomicU64::new(0));
         let stop = Arc::new(AtomicBool::new(false));
         let sequence = Arc::new(Mutex::new(BTreeMap::<u16, u8>::new()));
-        let sock = UdpSocket::bind("127.0.0.1:0").expect("bind a console");
+        let sock = UdpSocket::bind((from, 0)).expect("bind a console");
         let thread = {
             let (show, sent, stop, sequence) =
                 (show.clone(), sent.clone(), stop.clone(), sequence.clone());
@@ -170,6 +181,11 @@ fn show(priority: u8, slots: &[(u16, usize, u8)]) -> Show {
 /// A daemon whose `[input.sacn]` listens on loopback, and whose own sACN output also goes
 /// there at priority 200 (if its CID were not ignored, its own output would win every slot).
 fn daemon(name: &str) -> (Daemon, SocketAddr) {
+    daemon_with(name, "")
+}
+
+/// [`daemon`] with `more` lines in its `[input.sacn]`.
+fn daemon_with(name: &str, more: &str) -> (Daemon, SocketAddr) {
     let port = free_port(LOCALHOST, LOCALHOST);
     let input = SocketAddr::new(LOCALHOST, port);
     let extra = format!(
@@ -177,6 +193,7 @@ fn daemon(name: &str) -> (Daemon, SocketAddr) {
 [input.sacn]
 bind = "{input}"
 universes = [1, 2]
+{more}
 
 [[output.sacn]]
 destination = "127.0.0.1"
@@ -554,6 +571,32 @@ fn follow_tracks_the_console_until_a_pick() {
     let want = levels(&console);
     until_output(&mut d, "/vo/console/follow", vec![int(1)], &want);
     d.ok("/vo/console/follow", vec![int(0)], "/vo/console/follow");
+}
+
+#[test]
+fn a_sender_outside_the_inputs_allow_list_is_refused_and_named_once() {
+    let (mut d, input) = daemon_with("console-allow", "allow = [\"127.0.0.1/32\"]");
+    let outsider = std::net::IpAddr::V4(std::net::Ipv4Addr::new(127, 0, 0, 2));
+    let stranger = Console::start_from(outsider, input, 7, "Stranger", show(150, &[(1, 1, 255)]));
+    stranger.sent_more(40);
+    let console = Console::start(input, 1, "Eos", show(100, &console_levels()));
+    let s = wait_sources(&mut d, "the allowed console alone, counting", |s| {
+        s.len() == 1 && s[0].name == "Eos"
+    });
+    assert_eq!(s[0].priority, 100);
+    // A grab reproduces the allowed console alone: the stranger's 255 at 1/1, at a higher
+    // priority, is not merged.
+    stranger.sent_more(40);
+    let want = console.show.lock().expect("show").levels.clone();
+    until_output(&mut d, "/vo/console/grab", vec![], &want);
+    assert!(sources(&mut d).iter().all(|s| s.name != "Stranger"));
+    let refused = d
+        .log_text()
+        .lines()
+        .filter(|l| l.contains("refused 127.0.0.2, not in input.sacn.allow"))
+        .count();
+    assert_eq!(refused, 1, "logged once per sender:\n{}", d.log_text());
+    drop((console, stranger));
 }
 
 #[test]

@@ -132,7 +132,7 @@ impl ArtnetDest {
     }
 
     /// The Art-Net port-address of scene universe `universe`, if it fits in 15 bits.
-    pub(crate) fn port_address(&self, universe: u16) -> Option<u16> {
+    pub fn port_address(&self, universe: u16) -> Option<u16> {
         let pa = i64::from(universe) + i64::from(self.universe_offset);
         u16::try_from(pa).ok().filter(|&pa| pa <= 0x7fff)
     }
@@ -228,6 +228,9 @@ pub struct SacnInput {
     /// An IPv4 address of the interface multicast groups are joined on; empty: unicast
     /// only.
     pub interface: String,
+    /// Who may feed the input (addresses or CIDR blocks, as `osc.allow`); `None`: the
+    /// `osc.allow` list. Packets from anyone else are dropped before they are read.
+    pub allow: Option<Vec<String>>,
 }
 
 impl Default for SacnInput {
@@ -236,6 +239,7 @@ impl Default for SacnInput {
             bind: "0.0.0.0:5568".into(),
             universes: Vec::new(),
             interface: String::new(),
+            allow: None,
         }
     }
 }

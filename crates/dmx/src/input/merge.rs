@@ -54,7 +54,14 @@ pub enum Verdict {
     Terminated,
     /// A start code other than 0x00 and 0xDD: only its sequence number counts.
     OtherStartCode,
+    /// A new stream while [`MAX_STREAMS`] are tracked: dropped (a flood of made-up CIDs
+    /// cannot grow the merge without bound).
+    TooMany,
 }
+
+/// The most streams (source and universe) tracked at once: a console, a backup console and
+/// a few more per universe fit many times over.
+pub const MAX_STREAMS: usize = 256;
 
 /// One source on one universe.
 #[derive(Debug, Clone)]
@@ -158,6 +165,9 @@ impl Merger {
                 s.last_packet = now;
             }
             return Verdict::OtherStartCode;
+        }
+        if !self.streams.contains_key(&key) && self.streams.len() >= MAX_STREAMS {
+            return Verdict::TooMany;
         }
         let s = self.streams.entry(key).or_insert_with(|| Stream {
             name: p.source_name.clone(),
@@ -472,5 +482,29 @@ mod tests {
             (1, BACKUP, 90, &[1u16][..])
         );
         assert_eq!(s[0].age, Duration::from_millis(1700));
+    }
+
+    #[test]
+    fn a_flood_of_new_cids_is_bounded_and_known_sources_go_on() {
+        let t0 = Instant::now();
+        let mut m = Merger::new(OWN, &[1]);
+        assert_eq!(
+            m.receive(&levels(CONSOLE, 100, 1, &[200]), t0),
+            Verdict::Taken
+        );
+        let mut refused = 0;
+        for i in 0..1000u32 {
+            let mut cid = [0u8; 16];
+            cid[..4].copy_from_slice(&(i + 1000).to_be_bytes());
+            if m.receive(&levels(Uuid::from_bytes(cid), 100, 1, &[9]), t0) == Verdict::TooMany {
+                refused += 1;
+            }
+        }
+        assert_eq!(refused, 1000 - (MAX_STREAMS - 1));
+        // The console, already tracked, is still taken.
+        assert_eq!(
+            m.receive(&levels(CONSOLE, 100, 2, &[201]), t0),
+            Verdict::Taken
+        );
     }
 }

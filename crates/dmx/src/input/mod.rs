@@ -14,8 +14,9 @@ mod packet;
 pub use merge::{Merger, SAMPLE, SOURCE_LOSS, SourceInfo, Verdict};
 pub use packet::{DataPacket, PER_ADDRESS_PRIORITY, parse};
 
+use std::collections::HashSet;
 use std::io;
-use std::net::{Ipv4Addr, SocketAddr, UdpSocket};
+use std::net::{IpAddr, Ipv4Addr, SocketAddr, UdpSocket};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::thread::{self, JoinHandle};
@@ -90,8 +91,14 @@ impl Input {
     }
 
     /// Starts receiving on `socket` (from [`Input::open`] with the same `config`).
-    /// Packets from `own` (visobjd's output CID) are ignored.
-    pub fn start(config: &SacnInput, socket: InputSocket, own: Uuid) -> Result<Input, String> {
+    /// Packets from `own` (visobjd's output CID) are ignored, and so are, before anything
+    /// else is done with them, packets from senders `permits` refuses (each logged once).
+    pub fn start(
+        config: &SacnInput,
+        socket: InputSocket,
+        own: Uuid,
+        permits: Permits,
+    ) -> Result<Input, String> {
         let InputSocket {
             socket,
             bind,
@@ -101,6 +108,7 @@ impl Input {
         let (tx, changes) = watch::channel(0u64);
         let stop = Arc::new(AtomicBool::new(false));
         let receiver = Receiver {
+            permits,
             socket,
             merger: merger.clone(),
             universes: config.universes.clone(),
@@ -194,8 +202,16 @@ fn lock(m: &Mutex<Merger>) -> MutexGuard<'_, Merger> {
     m.lock().unwrap_or_else(|p| p.into_inner())
 }
 
+/// Who may feed the input: the daemon's allow-list rule for `[input.sacn] allow`.
+pub type Permits = Box<dyn Fn(IpAddr) -> bool + Send>;
+
+/// How many refused senders are each named in the log; past them, refusals are counted
+/// in a line at most every 10 s.
+const NAMED_REFUSALS: usize = 64;
+
 /// The receiver thread's state.
 struct Receiver {
+    permits: Permits,
     socket: UdpSocket,
     merger: Arc<Mutex<Merger>>,
     universes: Vec<u16>,
@@ -210,14 +226,46 @@ impl Receiver {
         let mut malformed = Throttle::default();
         let mut failed = Throttle::default();
         let mut last: Vec<Option<[u8; SLOTS]>> = Vec::new();
+        let mut refused: HashSet<IpAddr> = HashSet::new();
+        let mut refused_more = Throttle::default();
+        let mut too_many = Throttle::default();
         while !self.stop.load(Ordering::Acquire) {
             let got = self.socket.recv_from(&mut buf);
             let now = Instant::now();
+            // A refused sender costs one address check: no parse, no lock, no merge.
+            if let Ok((_, from)) = &got
+                && !(self.permits)(from.ip())
+            {
+                if refused.len() < NAMED_REFUSALS {
+                    if refused.insert(from.ip()) {
+                        tracing::warn!(
+                            "sACN input: refused {}, not in input.sacn.allow (logged once per sender)",
+                            from.ip()
+                        );
+                    }
+                } else if let Some(suppressed) = refused_more.allow(now) {
+                    tracing::warn!(
+                        suppressed,
+                        "sACN input: refused {}, not in input.sacn.allow (more senders than are named)",
+                        from.ip()
+                    );
+                }
+                continue;
+            }
             let mut m = lock(&self.merger);
             match got {
                 Ok((n, from)) => match parse(&buf[..n]) {
                     Ok(Some(p)) => {
-                        m.receive(&p, now);
+                        if m.receive(&p, now) == merge::Verdict::TooMany
+                            && let Some(suppressed) = too_many.allow(now)
+                        {
+                            tracing::warn!(
+                                from = %from,
+                                suppressed,
+                                "sACN input: dropped a new source: {} streams are tracked already",
+                                merge::MAX_STREAMS
+                            );
+                        }
                     }
                     Ok(None) => {}
                     Err(why) => {
