@@ -6,7 +6,10 @@
 //! `Origin` and `Sec-Fetch-Site` a browser sends must be this page's own. GET never changes
 //! anything.
 
-use std::sync::Arc;
+use std::collections::HashMap;
+use std::net::IpAddr;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
 
 use axum::extract::{Request, State};
 use axum::http::{HeaderMap, HeaderValue, Method, StatusCode, header};
@@ -40,8 +43,28 @@ impl Access {
 /// nothing cached, nothing sniffed, never framed by another page.
 pub(super) async fn guard(State(sh): State<Arc<Shared>>, req: Request, next: Next) -> Response {
     let access = Access::of(&sh.engine.config());
+    let client = req.extensions().get::<Client>().map(|c| c.0.ip());
+    if let Some(ip) = client
+        && let Some(wait) = sh.guesses.blocked(ip, Instant::now())
+    {
+        return refuse(
+            StatusCode::TOO_MANY_REQUESTS,
+            &format!(
+                "too many wrong passwords from {ip}: try again in {} s",
+                wait.as_secs().max(1)
+            ),
+        );
+    }
     if let Err(refusal) = admit(&access, req.method(), req.headers()) {
         let from = req.extensions().get::<Client>().map(|c| c.0);
+        // A wrong password given (not the browser's first request, which has none) counts
+        // towards the sender's limit.
+        if refusal.0 == StatusCode::UNAUTHORIZED
+            && req.headers().contains_key(header::AUTHORIZATION)
+            && let Some(ip) = client
+        {
+            sh.guesses.failed(ip, Instant::now());
+        }
         tracing::info!(
             "http: {} {} from {from:?} refused: {}",
             req.method(),
@@ -72,6 +95,49 @@ pub(super) async fn guard(State(sh): State<Arc<Shared>>, req: Request, next: Nex
         ),
     );
     r
+}
+
+/// Wrong passwords a sender may give in [`GUESS_WINDOW`] before it is refused for that long.
+const GUESSES: u32 = 10;
+/// See [`GUESSES`].
+const GUESS_WINDOW: Duration = Duration::from_secs(60);
+/// Senders whose wrong passwords are counted at once; the oldest is forgotten past it.
+const GUESSERS: usize = 1024;
+
+/// Wrong passwords per sender: after [`GUESSES`] within [`GUESS_WINDOW`], every request
+/// from it is refused (429) until the window has passed, so the password cannot be
+/// guessed at network speed.
+#[derive(Default)]
+pub(super) struct Guesses(Mutex<HashMap<IpAddr, (u32, Instant)>>);
+
+impl Guesses {
+    fn failed(&self, ip: IpAddr, now: Instant) {
+        let mut m = self.0.lock().unwrap_or_else(|p| p.into_inner());
+        if m.len() >= GUESSERS && !m.contains_key(&ip) {
+            if let Some(oldest) = m.iter().min_by_key(|(_, (_, t))| *t).map(|(k, _)| *k) {
+                m.remove(&oldest);
+            }
+        }
+        let e = m.entry(ip).or_insert((0, now));
+        if now.duration_since(e.1) > GUESS_WINDOW {
+            *e = (0, now);
+        }
+        e.0 += 1;
+        if e.0 == GUESSES {
+            tracing::warn!(
+                "http: {GUESSES} wrong passwords from {ip}: refused for {} s",
+                GUESS_WINDOW.as_secs()
+            );
+        }
+    }
+
+    /// How long `ip` is still refused for, if it is.
+    fn blocked(&self, ip: IpAddr, now: Instant) -> Option<Duration> {
+        let m = self.0.lock().unwrap_or_else(|p| p.into_inner());
+        let (n, since) = *m.get(&ip)?;
+        let left = GUESS_WINDOW.checked_sub(now.duration_since(since))?;
+        (n >= GUESSES && !left.is_zero()).then_some(left)
+    }
 }
 
 /// Whether a request may go on: Host, password, and for a state change its origin.

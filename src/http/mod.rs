@@ -80,6 +80,7 @@ impl Http {
             engine: Arc::clone(&engine),
             runner,
             pictures: pictures::Caches::default(),
+            guesses: access::Guesses::default(),
         });
         let accept = tokio::spawn(accept(listener, engine, router(shared)));
         Ok(Http { addr, accept })
@@ -103,6 +104,7 @@ struct Shared {
     engine: Arc<Engine>,
     runner: Runner,
     pictures: pictures::Caches,
+    guesses: access::Guesses,
 }
 
 /// The client's address, put on each request by the accept loop.
@@ -146,6 +148,10 @@ fn router(shared: Arc<Shared>) -> Router {
 /// Takes connections from senders `osc.allow` permits (as the running config says now).
 async fn accept(listener: TcpListener, engine: Arc<Engine>, app: Router) {
     let slots = Arc::new(Semaphore::new(MAX_CONNECTIONS));
+    // Refusals are logged at most every 10 s, with the count left out: a flood of
+    // connections from outside must not flood the journal.
+    let mut refused = visobjd_throttle::Throttle::default();
+    let mut busy = visobjd_throttle::Throttle::default();
     loop {
         let (stream, from) = match listener.accept().await {
             Ok(c) => c,
@@ -156,11 +162,18 @@ async fn accept(listener: TcpListener, engine: Arc<Engine>, app: Router) {
             }
         };
         if !permits(&engine.config().allow_list(), from.ip()) {
-            tracing::info!("http: refused {from}, not in osc.allow");
+            if let Some(suppressed) = refused.allow(std::time::Instant::now()) {
+                tracing::info!(suppressed, "http: refused {from}, not in osc.allow");
+            }
             continue;
         }
         let Ok(slot) = Arc::clone(&slots).try_acquire_owned() else {
-            tracing::info!("http: {from} refused, {MAX_CONNECTIONS} connections busy");
+            if let Some(suppressed) = busy.allow(std::time::Instant::now()) {
+                tracing::info!(
+                    suppressed,
+                    "http: {from} refused, {MAX_CONNECTIONS} connections busy"
+                );
+            }
             continue;
         };
         let service = hyper_util::service::TowerToHyperService::new(

@@ -634,6 +634,24 @@ fn the_password_is_asked_for() {
     let r = osc(addr, "/vo/pick", serde_json::json!([1]), &[&good]);
     assert_eq!(r.status, 200, "{}", String::from_utf8_lossy(&r.body));
     assert_eq!(d.status().entry, 1);
+
+    // Guessing at network speed: after ten wrong passwords in a minute the sender is
+    // refused for the rest of it, the right password included.
+    let mut statuses = Vec::new();
+    for _ in 0..12 {
+        statuses.push(send(addr, "GET", "/state.json", &[&wrong], b"").status);
+    }
+    assert_eq!(statuses[..9], [401; 9], "{statuses:?}");
+    assert_eq!(statuses[10..], [429; 2], "{statuses:?}");
+    let r = send(addr, "GET", "/state.json", &[&good], b"");
+    assert_eq!(r.status, 429);
+    assert!(
+        r.json()["error"]
+            .as_str()
+            .is_some_and(|e| e.contains("too many wrong passwords")),
+        "{}",
+        String::from_utf8_lossy(&r.body)
+    );
 }
 
 /// The look the page shows (its last state: every light's intensity and colour), as the
