@@ -113,10 +113,11 @@ pub(super) struct Guesses(Mutex<HashMap<IpAddr, (u32, Instant)>>);
 impl Guesses {
     fn failed(&self, ip: IpAddr, now: Instant) {
         let mut m = self.0.lock().unwrap_or_else(|p| p.into_inner());
-        if m.len() >= GUESSERS && !m.contains_key(&ip) {
-            if let Some(oldest) = m.iter().min_by_key(|(_, (_, t))| *t).map(|(k, _)| *k) {
-                m.remove(&oldest);
-            }
+        if m.len() >= GUESSERS
+            && !m.contains_key(&ip)
+            && let Some(oldest) = m.iter().min_by_key(|(_, (_, t))| *t).map(|(k, _)| *k)
+        {
+            m.remove(&oldest);
         }
         let e = m.entry(ip).or_insert((0, now));
         if now.duration_since(e.1) > GUESS_WINDOW {
