@@ -100,6 +100,7 @@ fn sighup_mid_show_moves_a_light_and_a_priority_without_a_dark_frame() {
         f.priority == 120 && f.dmx[29] == level && f.dmx[1] == 0
     });
     let longest = longest_interval(&d, before);
+    eprintln!("the longest frame interval across the reload: {longest:?} (period {PERIOD:?})");
     assert!(
         longest < GAP,
         "a frame interval of {longest:?} across the reload (period {PERIOD:?})"
