@@ -423,9 +423,19 @@ fn exr_declaring(path: &Path, w: i32, h: i32) {
     attribute(&mut bytes, "dataWindow", "box2i", &window);
     attribute(&mut bytes, "displayWindow", "box2i", &window);
     attribute(&mut bytes, "lineOrder", "lineOrder", &[0]);
-    attribute(&mut bytes, "pixelAspectRatio", "float", &1.0f32.to_le_bytes());
+    attribute(
+        &mut bytes,
+        "pixelAspectRatio",
+        "float",
+        &1.0f32.to_le_bytes(),
+    );
     attribute(&mut bytes, "screenWindowCenter", "v2f", &[0; 8]);
-    attribute(&mut bytes, "screenWindowWidth", "float", &1.0f32.to_le_bytes());
+    attribute(
+        &mut bytes,
+        "screenWindowWidth",
+        "float",
+        &1.0f32.to_le_bytes(),
+    );
     bytes.push(0);
     std::fs::write(path, bytes).expect("write the EXR");
 }
@@ -444,7 +454,15 @@ fn a_basis_image_declaring_too_many_pixels_is_refused_before_reading() {
     let look = dir.join("look.json");
     std::fs::write(&look, r#"{"lights": []}"#).unwrap();
     let out = dir.join("out.png");
-    let render = ["render", "--scene", s(&scene), "--look", s(&look), "--out", s(&out)];
+    let render = [
+        "render",
+        "--scene",
+        s(&scene),
+        "--look",
+        s(&look),
+        "--out",
+        s(&out),
+    ];
     fails_with(&run(&render), limit);
     // One side over the limit is refused too, however few pixels in all.
     exr_declaring(&scene.join("basis/002.exr"), 20_000, 10);
