@@ -105,17 +105,36 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
 }
 
+/// How deep `--fixtures` is searched: a library nests a few levels
+/// (`fixtures/<manufacturer>/`).
+const MAX_FOLDER_DEPTH: usize = 32;
+
 /// The GDTF (`.gdtf`) and OFL (`.json`) files under `dir`, by their path relative to it
-/// (an OFL file's manufacturer is in its path); none without `--fixtures`. A file there
+/// (an OFL file's manufacturer is in its path); none without `--fixtures`. Links are
+/// followed, but each folder and file is taken once, however many ways lead to it (a
+/// link back up is no loop), and at most [`MAX_FOLDER_DEPTH`] folders down. A file there
 /// that does not parse is an error naming it.
 fn library(dir: Option<&Path>) -> anyhow::Result<Library> {
     let mut library = Library::default();
     let Some(dir) = dir else {
         return Ok(library);
     };
-    let mut todo = vec![dir.to_path_buf()];
+    let mut todo = vec![(dir.to_path_buf(), 0)];
     let mut files = Vec::new();
-    while let Some(d) = todo.pop() {
+    // Folders and files by their real path: a link back up (a loop) is not walked again.
+    let mut seen = BTreeSet::new();
+    let real = |p: &Path| p.canonicalize().unwrap_or_else(|_| p.to_path_buf());
+    while let Some((d, depth)) = todo.pop() {
+        if !seen.insert(real(&d)) {
+            continue;
+        }
+        if depth > MAX_FOLDER_DEPTH {
+            bail!(
+                "--fixtures {}: {} is more than {MAX_FOLDER_DEPTH} folders deep; give a library that nests less",
+                dir.display(),
+                d.display()
+            );
+        }
         let entries = std::fs::read_dir(&d)
             .with_context(|| format!("--fixtures {}: cannot read it", d.display()))?;
         for e in entries {
@@ -123,8 +142,8 @@ fn library(dir: Option<&Path>) -> anyhow::Result<Library> {
                 .with_context(|| format!("--fixtures {}: cannot read it", d.display()))?
                 .path();
             if path.is_dir() {
-                todo.push(path);
-            } else {
+                todo.push((path, depth + 1));
+            } else if seen.insert(real(&path)) {
                 files.push(path);
             }
         }

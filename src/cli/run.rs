@@ -77,11 +77,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
     // The stage first: the saved live look goes out before anything slow happens.
     let files = Files::new(&config.state_dir);
-    let live = restore_live(&files);
+    let live = restore_live(&files, &scene);
     let initial = live
         .as_ref()
-        .and_then(|l| l.live.to_look(&scene).ok())
-        .unwrap_or_else(|| Look::off(scene.lights.len()));
+        .map_or_else(|| Look::off(scene.lights.len()), |l| l.live.clone());
     let output = Output::start(
         &config.output,
         Patch::new(&scene),
@@ -89,7 +88,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         initial,
     )?;
     if let Some(l) = &live {
-        output.set_master(l.master.clamp(0.0, 1.0));
+        output.set_master(l.master);
         output.set_blackout(l.blackout);
     }
     tracing::info!(

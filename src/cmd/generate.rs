@@ -3,7 +3,10 @@
 
 use rosc::OscMessage;
 
+use std::ops::RangeInclusive;
+
 use super::{Context, int, int_arg, switch_arg};
+use crate::engine::session::{CLUSTERS, COUNT, SEED};
 use crate::engine::{Outcome, Refusal, msg};
 use crate::osc::args::Request;
 use visobjd_method::gallery::MAX_SEED;
@@ -35,17 +38,13 @@ impl Cmd {
         } else if req.matches("/vo/explore").is_some() {
             Cmd::Explore(switch_arg(req, "explore")?)
         } else if req.matches("/vo/generate/count").is_some() {
-            Cmd::Set(GenerateSetting::Count(
-                int_arg(req, 0, "count", 1, 1000)? as u32
-            ))
+            Cmd::Set(GenerateSetting::Count(setting(req, "count", &COUNT)?))
         } else if req.matches("/vo/generate/clusters").is_some() {
-            Cmd::Set(GenerateSetting::Clusters(
-                int_arg(req, 0, "clusters", 1, 64)? as u32,
-            ))
+            Cmd::Set(GenerateSetting::Clusters(setting(
+                req, "clusters", &CLUSTERS,
+            )?))
         } else if req.matches("/vo/generate/seed").is_some() {
-            Cmd::Set(GenerateSetting::Seed(
-                int_arg(req, 0, "seed", 0, MAX_SEED as i64)? as u64,
-            ))
+            Cmd::Set(GenerateSetting::Seed(setting(req, "seed", &SEED)?))
         } else {
             return Ok(None);
         }))
@@ -97,4 +96,14 @@ impl Cmd {
             Ok(Outcome::reply(reply).saved())
         })
     }
+}
+
+/// Argument 0 as a setting in `range` (the range `session.json` is restored within).
+fn setting<T>(req: &Request, what: &str, range: &RangeInclusive<T>) -> Result<T, String>
+where
+    T: Copy + Into<u64> + TryFrom<i64>,
+{
+    let bound = |v: T| i64::try_from(v.into()).unwrap_or(i64::MAX);
+    let v = int_arg(req, 0, what, bound(*range.start()), bound(*range.end()))?;
+    T::try_from(v).map_err(|_| format!("{what} {v} is out of range"))
 }

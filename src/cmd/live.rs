@@ -6,7 +6,7 @@ use rosc::{OscMessage, OscType};
 use super::{
     Context, Named, group, int, light_args, num_arg, one_light, rgb_args, switch_arg, text,
 };
-use crate::engine::session::Change;
+use crate::engine::session::{Change, FADE_S};
 use crate::engine::{Outcome, Refusal, msg};
 use crate::osc::args::Request;
 
@@ -46,7 +46,13 @@ impl Cmd {
         Ok(Some(if req.matches("/vo/live").is_some() {
             Cmd::Live
         } else if req.matches("/vo/fade").is_some() {
-            Cmd::Fade(num_arg(req, 0, "fade seconds", 0.0, 600.0)?)
+            Cmd::Fade(num_arg(
+                req,
+                0,
+                "fade seconds",
+                f64::from(*FADE_S.start()),
+                f64::from(*FADE_S.end()),
+            )?)
         } else if req.matches("/vo/master").is_some() {
             Cmd::Master(num_arg(req, 0, "master", 0.0, 1.0)?)
         } else if req.matches("/vo/blackout").is_some() {

@@ -62,6 +62,12 @@ impl GalleryFile {
     /// The gallery, its thumbnails not rendered yet and serial 0 (see
     /// `Engine::received_gallery`); Err names what does not fit this scene.
     fn to_gallery(&self, scene: &Scene) -> Result<Gallery, String> {
+        if !self.threshold.is_finite() {
+            return Err(format!(
+                "its threshold {} is not a finite number",
+                self.threshold
+            ));
+        }
         let candidates = self
             .candidates
             .iter()
@@ -169,13 +175,18 @@ pub fn from_state(
     let working: WorkingFile =
         serde_json::from_str(&parts[3]).map_err(|e| read("working state", e))?;
     let fit = |e: String| format!("the main's live look does not fit this scene: {e}");
+    live.live.to_look(scene).map_err(fit)?;
+    live.base.to_look(scene).map_err(fit)?;
+    let (restored, mut lost) = live.restore(scene);
     let mut s = fresh;
-    s.live = live.live.to_look(scene).map_err(fit)?;
-    s.base = live.base.to_look(scene).map_err(fit)?;
-    s.master = live.master.clamp(0.0, 1.0);
-    s.blackout = live.blackout;
+    s.live = restored.live;
+    s.base = restored.base;
+    s.master = restored.master;
+    s.blackout = restored.blackout;
+    let mut looks = looks;
+    lost.extend(looks.drop_invalid());
     s.looks = looks.looks;
-    let mut lost = apply_session(scene, &file, &mut s);
+    lost.extend(apply_session(scene, &file, &mut s));
     s.gallery = working
         .gallery
         .map(|g| g.to_gallery(scene))

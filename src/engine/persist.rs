@@ -6,16 +6,17 @@
 //! flood of fader moves costs one write per moment, never one per message.
 
 use std::collections::BTreeMap;
+use std::ops::RangeInclusive;
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
 use super::rules::RulesFile;
-use super::session::{Entry, Session};
+use super::session::{CLUSTERS, COUNT, Entry, FADE_S, SEED, Session};
 use visobjd_files::{Loaded, load_json, save_json};
 use visobjd_method::objective::ObjectiveRecord;
 use visobjd_scene::Scene;
-use visobjd_scene::look::LookFile;
+use visobjd_scene::look::{Look, LookFile};
 
 /// `live.json`: what the stage shows.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -102,55 +103,178 @@ impl Files {
 
     /// Restores what the files hold into a fresh session; anything unreadable is kept
     /// aside (logged) and the rest still restored. What a readable file holds but this
-    /// scene cannot take (a lock on a group it no longer has, an objective that does not
-    /// parse) is logged item by item, and the file is copied aside before it is rewritten.
+    /// scene or the session cannot take (a lock on a group it no longer has, an objective
+    /// that does not parse, a number that is not finite or out of its range) is left out
+    /// and logged item by item, and the file is copied aside before it is rewritten.
     pub fn restore(&self, scene: &Scene, session: &mut Session) {
-        if let Loaded::Ok(live) = load_json::<LiveFile>(&self.live()) {
-            match (live.live.to_look(scene), live.base.to_look(scene)) {
-                (Ok(l), Ok(b)) => {
-                    session.live = l;
-                    session.base = b;
-                    session.master = live.master.clamp(0.0, 1.0);
-                    session.blackout = live.blackout;
-                }
-                (Err(e), _) | (_, Err(e)) => {
-                    partly_restored(&self.live(), &[format!("does not fit the scene: {e}")])
-                }
-            }
+        let mut partial = [false; 3];
+        if let Loaded::Ok(file) = load_json::<LiveFile>(&self.live()) {
+            let (live, lost) = file.restore(scene);
+            session.live = live.live;
+            session.base = live.base;
+            session.master = live.master;
+            session.blackout = live.blackout;
+            partial[0] = partly_restored(&self.live(), &lost);
         }
-        if let Loaded::Ok(looks) = load_json::<LooksFile>(&self.looks()) {
-            session.looks = looks.looks;
+        if let Loaded::Ok(mut file) = load_json::<LooksFile>(&self.looks()) {
+            let lost = file.drop_invalid();
+            session.looks = file.looks;
+            partial[1] = partly_restored(&self.looks(), &lost);
         }
         if let Loaded::Ok(file) = load_json::<SessionFile>(&self.session()) {
-            partly_restored(&self.session(), &apply_session(scene, &file, session));
+            let lost = apply_session(scene, &file, session);
+            partial[2] = partly_restored(&self.session(), &lost);
+        }
+        // A file restored in part is written again as restored (its copy is aside), so
+        // the next start does not lose the same things again.
+        let snap = Snapshot::of(scene, session);
+        for (path, written) in [
+            (
+                self.live(),
+                partial[0].then(|| save_json(&self.live(), &snap.live)),
+            ),
+            (
+                self.looks(),
+                partial[1].then(|| self.save_looks(&session.looks)),
+            ),
+            (
+                self.session(),
+                partial[2].then(|| save_json(&self.session(), &snap.session)),
+            ),
+        ] {
+            if let Some(Err(e)) = written {
+                tracing::error!("{}: cannot write what was restored: {e}", path.display());
+            }
         }
     }
 }
 
-/// Logs what `path` held that was not restored and keeps a copy of it aside.
-fn partly_restored(path: &Path, lost: &[String]) {
+/// Logs what `path` held that was not restored and keeps a copy of it aside; whether
+/// the file may now be rewritten (something was lost and the copy is aside).
+fn partly_restored(path: &Path, lost: &[String]) -> bool {
     if lost.is_empty() {
-        return;
+        return false;
     }
     for what in lost {
         tracing::error!("{}: not restored: {what}", path.display());
     }
     match visobjd_files::keep_copy(path) {
-        Ok(aside) => tracing::error!(
-            "{}: kept the file as it was in {}",
-            path.display(),
-            aside.display()
-        ),
-        Err(e) => tracing::error!("{}: could not keep a copy aside: {e}", path.display()),
+        Ok(aside) => {
+            tracing::error!(
+                "{}: kept the file as it was in {}",
+                path.display(),
+                aside.display()
+            );
+            true
+        }
+        Err(e) => {
+            tracing::error!("{}: could not keep a copy aside: {e}", path.display());
+            false
+        }
     }
 }
 
-/// The live look file alone, for restoring the stage before anything else loads.
-pub fn restore_live(files: &Files) -> Option<LiveFile> {
+/// What `live.json` puts on stage.
+#[derive(Debug, Clone)]
+pub struct Live {
+    /// The live look.
+    pub live: Look,
+    /// The base look.
+    pub base: Look,
+    /// Grand master.
+    pub master: f32,
+    /// Blackout.
+    pub blackout: bool,
+}
+
+impl LiveFile {
+    /// The stage this file holds on `scene`: each light a look cannot take is left out
+    /// (off), a master that is not one stays at full; a sentence for each.
+    pub fn restore(&self, scene: &Scene) -> (Live, Vec<String>) {
+        let (live, live_lost) = self.live.fit(scene);
+        let (base, base_lost) = self.base.fit(scene);
+        let mut lost: Vec<String> = (live_lost.iter().map(|e| format!("live look: {e}")))
+            .chain(base_lost.iter().map(|e| format!("base look: {e}")))
+            .collect();
+        let master = ranged("master", self.master, &(0.0..=1.0), 1.0, &mut lost);
+        let live = Live {
+            live,
+            base,
+            master,
+            blackout: self.blackout,
+        };
+        (live, lost)
+    }
+}
+
+impl LooksFile {
+    /// Leaves out each saved look's lights whose numbers are not levels, with a sentence
+    /// for each (channels are not checked: a saved look outlives a patch).
+    pub fn drop_invalid(&mut self) -> Vec<String> {
+        let mut lost = Vec::new();
+        for (n, look) in &mut self.looks {
+            lost.extend(
+                look.drop_invalid()
+                    .into_iter()
+                    .map(|e| format!("look {n}: {e}")),
+            );
+        }
+        lost
+    }
+}
+
+/// The stage `live.json` holds, for putting it on the wire before anything else loads
+/// (what it cannot take is left out quietly here: [`Files::restore`] logs it).
+pub fn restore_live(files: &Files, scene: &Scene) -> Option<Live> {
     match load_json::<LiveFile>(&files.live()) {
-        Loaded::Ok(live) => Some(live),
+        Loaded::Ok(file) => Some(file.restore(scene).0),
         _ => None,
     }
+}
+
+/// A number a state file restores.
+trait Number: Copy + PartialOrd + std::fmt::Display {
+    fn finite(self) -> bool;
+}
+
+impl Number for f32 {
+    fn finite(self) -> bool {
+        self.is_finite()
+    }
+}
+
+impl Number for u32 {
+    fn finite(self) -> bool {
+        true
+    }
+}
+
+impl Number for u64 {
+    fn finite(self) -> bool {
+        true
+    }
+}
+
+/// `value` when it is a finite number in `range`; else `default`, with a sentence naming
+/// `name`, the value and the default in `lost`.
+fn ranged<T: Number>(
+    name: &str,
+    value: T,
+    range: &RangeInclusive<T>,
+    default: T,
+    lost: &mut Vec<String>,
+) -> T {
+    let why = if !value.finite() {
+        "is not a finite number".to_string()
+    } else if !range.contains(&value) {
+        format!("is outside {}..={}", range.start(), range.end())
+    } else {
+        return value;
+    };
+    lost.push(format!(
+        "{name} {value} {why}; kept the default ({default})"
+    ));
+    default
 }
 
 /// Applies what `f` holds to `s`; returns a sentence for each thing it could not.
@@ -159,18 +283,15 @@ pub(super) fn apply_session(scene: &Scene, f: &SessionFile, s: &mut Session) -> 
     s.objectives = f
         .objectives
         .iter()
-        .filter_map(|o| {
-            let objective = o.record.to_objective();
-            if objective.is_none() {
-                lost.push(format!(
-                    "objective {} (`{}`): its aspects or region do not parse",
-                    o.id, o.record.image
-                ));
-            }
-            Some(Entry {
+        .filter_map(|o| match o.record.to_objective() {
+            Ok(objective) => Some(Entry {
                 id: o.id,
-                objective: objective?,
-            })
+                objective,
+            }),
+            Err(e) => {
+                lost.push(format!("objective {} (`{}`): {e}", o.id, o.record.image));
+                None
+            }
         })
         .collect();
     s.next_id = f
@@ -198,12 +319,10 @@ pub(super) fn apply_session(scene: &Scene, f: &SessionFile, s: &mut Session) -> 
         }
     }
     lost.extend(s.rules.restore(scene, &f.rules));
-    s.count = f.count.clamp(1, 1000);
-    s.clusters = f.clusters.clamp(1, 64);
-    s.seed = f.seed;
-    if f.fade_s.is_finite() {
-        s.fade_s = f.fade_s.clamp(0.0, 600.0);
-    }
+    s.count = ranged("count", f.count, &COUNT, s.count, &mut lost);
+    s.clusters = ranged("clusters", f.clusters, &CLUSTERS, s.clusters, &mut lost);
+    s.seed = ranged("seed", f.seed, &SEED, s.seed, &mut lost);
+    s.fade_s = ranged("fade_s", f.fade_s, &FADE_S, s.fade_s, &mut lost);
     lost
 }
 

@@ -3,6 +3,7 @@
 //! the rules of how it changes; no I/O.
 
 use std::collections::BTreeMap;
+use std::ops::RangeInclusive;
 
 use visobjd_method::gallery::Generation;
 use visobjd_method::objective::Objective;
@@ -17,6 +18,15 @@ use super::rules::Rules;
 
 /// Base looks kept for undo (docs/osc.md; at least 32 were asked for).
 pub const HISTORY: usize = 64;
+
+/// Candidates per generate (`/vo/generate/count`, `session.json`).
+pub const COUNT: RangeInclusive<u32> = 1..=1000;
+/// Gallery entries at most (`/vo/generate/clusters`, `session.json`).
+pub const CLUSTERS: RangeInclusive<u32> = 1..=64;
+/// Seed settings: 0 is a new random seed each generate.
+pub const SEED: RangeInclusive<u64> = 0..=visobjd_method::gallery::MAX_SEED;
+/// Crossfade seconds (`/vo/fade`, `session.json`).
+pub const FADE_S: RangeInclusive<f32> = 0.0..=600.0;
 
 /// An objective with the id OSC addresses use.
 #[derive(Debug, Clone)]

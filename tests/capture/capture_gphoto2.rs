@@ -367,3 +367,38 @@ fn a_camera_that_stops_answering_fails_clearly_and_the_capture_resumes() {
     assert_accurate(&s.dir, "resumed");
     std::fs::remove_dir_all(&s.dir).ok();
 }
+
+/// A raw frame whose header declares 100000x100000 pixels is refused by its header,
+/// before a decoder allocates 20 GB for it: the capture stops at once with the sentence
+/// and terminates its streams, so the console takes the rig back.
+#[test]
+fn a_raw_frame_declaring_too_many_pixels_stops_the_capture_and_terminates_its_streams() {
+    let Some(s) = setup("capture-gphoto2-huge-raw", "") else {
+        return;
+    };
+    let started = std::time::Instant::now();
+    let (out, packets) = s.run(
+        &["--format", "raw"],
+        &[("FAKE_GPHOTO2_RAW_DECLARES", "100000x100000")],
+    );
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{}", text(&out));
+    assert!(
+        stderr.contains("shot-1.DNG: declares 100000x100000 pixels; a raw frame may have at most 32768 a side and 256 megapixels")
+            && !stderr.contains("panicked")
+            && !stderr.contains("memory allocation"),
+        "{}",
+        text(&out)
+    );
+    assert!(
+        started.elapsed() < std::time::Duration::from_secs(60),
+        "stopped at the first frame: {:?}",
+        started.elapsed()
+    );
+    assert!(
+        packets.iter().any(|p| p.terminated),
+        "the streams are terminated after the error"
+    );
+    assert!(packets.iter().all(|p| p.priority == 200), "priority 200");
+    std::fs::remove_dir_all(&s.dir).ok();
+}

@@ -396,6 +396,85 @@ fn check_summarises_a_clean_scene_and_refuses_a_broken_one() {
     );
 }
 
+/// A few hundred bytes of OpenEXR header declaring a `w` x `h` scanline image of half-float
+/// R, G, B, uncompressed, and no pixels: what a hostile or broken basis image looks like.
+fn exr_declaring(path: &Path, w: i32, h: i32) {
+    fn attribute(out: &mut Vec<u8>, name: &str, kind: &str, value: &[u8]) {
+        for text in [name, kind] {
+            out.extend(text.as_bytes());
+            out.push(0);
+        }
+        out.extend((value.len() as i32).to_le_bytes());
+        out.extend(value);
+    }
+    let ints = |v: &[i32]| v.iter().flat_map(|i| i.to_le_bytes()).collect::<Vec<u8>>();
+    let mut bytes = vec![0x76, 0x2f, 0x31, 0x01, 2, 0, 0, 0];
+    let mut channels = Vec::new();
+    for c in ["B", "G", "R"] {
+        channels.extend(c.as_bytes());
+        // Half, not linear, reserved, x and y sampling 1.
+        channels.extend([0, 1, 0, 0, 0, 0, 0, 0, 0]);
+        channels.extend(ints(&[1, 1]));
+    }
+    channels.push(0);
+    attribute(&mut bytes, "channels", "chlist", &channels);
+    attribute(&mut bytes, "compression", "compression", &[0]);
+    let window = ints(&[0, 0, w - 1, h - 1]);
+    attribute(&mut bytes, "dataWindow", "box2i", &window);
+    attribute(&mut bytes, "displayWindow", "box2i", &window);
+    attribute(&mut bytes, "lineOrder", "lineOrder", &[0]);
+    attribute(
+        &mut bytes,
+        "pixelAspectRatio",
+        "float",
+        &1.0f32.to_le_bytes(),
+    );
+    attribute(&mut bytes, "screenWindowCenter", "v2f", &[0; 8]);
+    attribute(
+        &mut bytes,
+        "screenWindowWidth",
+        "float",
+        &1.0f32.to_le_bytes(),
+    );
+    bytes.push(0);
+    std::fs::write(path, bytes).expect("write the EXR");
+}
+
+#[test]
+fn a_basis_image_declaring_too_many_pixels_is_refused_before_reading() {
+    let dir = temp_dir("cli-exr-huge");
+    let scene = stripes(&dir.join("scene"), 3, false);
+    exr_declaring(&scene.join("basis/002.exr"), 100_000, 100_000);
+    std::fs::create_dir_all(dir.join("config")).unwrap();
+    let config = dir.join("config/visobjd.toml");
+    std::fs::write(&config, "scene = \"../scene\"\n").unwrap();
+    let started = std::time::Instant::now();
+    let limit = "002.exr: is 100000x100000 pixels; a basis image may have at most 16384 a side and 64 megapixels";
+    fails_with(&run(&["check", "--config", s(&config)]), limit);
+    let look = dir.join("look.json");
+    std::fs::write(&look, r#"{"lights": []}"#).unwrap();
+    let out = dir.join("out.png");
+    let render = [
+        "render",
+        "--scene",
+        s(&scene),
+        "--look",
+        s(&look),
+        "--out",
+        s(&out),
+    ];
+    fails_with(&run(&render), limit);
+    // One side over the limit is refused too, however few pixels in all.
+    exr_declaring(&scene.join("basis/002.exr"), 20_000, 10);
+    fails_with(&run(&render), "is 20000x10 pixels");
+    assert!(
+        started.elapsed() < std::time::Duration::from_secs(30),
+        "refused at once: {:?}",
+        started.elapsed()
+    );
+    assert!(!out.exists(), "nothing written on failure");
+}
+
 #[test]
 fn check_lists_every_unusable_basis_image() {
     let dir = temp_dir("cli-check-images");

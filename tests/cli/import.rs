@@ -7,6 +7,7 @@
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
+use std::time::{Duration, Instant};
 
 use crate::common::bin;
 use visobjd_testkit::{temp_dir, tools, write_exr};
@@ -937,4 +938,154 @@ fn a_large_console_patch_comes_through_whole() {
         t
     };
     assert_eq!(strip(&a), strip(&b));
+}
+
+// ---- hostile sizes: each a sentence naming the file and the limit, in bounded time ----
+
+/// Runs `import` with `args`, which must fail within `within` with one line holding every
+/// `needle`, writing nothing to `out`.
+fn refused_within(args: &[&str], out: &Path, within: Duration, needles: &[&str]) {
+    let started = Instant::now();
+    fails_with(&run(args), needles);
+    assert!(
+        started.elapsed() < within,
+        "refused at once: {:?}",
+        started.elapsed()
+    );
+    assert!(!out.exists(), "nothing is written");
+}
+
+#[test]
+fn an_mvr_nested_too_deep_is_refused_without_overflowing_the_stack() {
+    let dir = temp_dir("import-mvr-deep");
+    let (open, close) = (
+        r#"<GroupObject name="g" uuid="00000000-0000-0000-0000-0000000000b1"><ChildList>"#,
+        "</ChildList></GroupObject>",
+    );
+    let levels = 10_000;
+    let children = format!(
+        "{}{}{}",
+        open.repeat(levels),
+        fixture("Deep", "1", None, "Default", "1"),
+        close.repeat(levels)
+    );
+    let mvr = dir.join("deep.mvr");
+    write_mvr(&mvr, &children);
+    let out = dir.join("scene");
+    refused_within(
+        &["import", s(&mvr), "--out", s(&out)],
+        &out,
+        Duration::from_secs(30),
+        &[
+            "deep.mvr: GeneralSceneDescription.xml",
+            "elements nested more than 64 deep",
+        ],
+    );
+}
+
+#[test]
+fn an_eos_csv_with_too_many_rows_is_refused_while_it_is_read() {
+    let dir = temp_dir("import-eos-rows");
+    let mut csv = String::from("START_CHANNELS\nCHANNEL,FIXTURE_TYPE,MANUFACTURER,ADDRESS,LABEL\n");
+    for c in 1..=1_000_000u32 {
+        csv += &format!("{c},Dimmer,Generic,,\n");
+    }
+    csv += "END_CHANNELS\n";
+    let path = dir.join("huge.csv");
+    std::fs::write(&path, csv).expect("write");
+    let out = dir.join("scene");
+    refused_within(
+        &["import", s(&path), "--out", s(&out)],
+        &out,
+        Duration::from_secs(30),
+        &["huge.csv: line 100003", "more than 100000 channel parts"],
+    );
+}
+
+#[test]
+fn a_fixture_folder_with_a_symlink_loop_is_walked_once() {
+    let dir = temp_dir("import-fixtures-loop");
+    let lib = dir.join("lib");
+    std::fs::create_dir_all(lib.join("a/b")).expect("mkdir");
+    std::fs::copy(fixtures().join(PAR), lib.join("a/b").join(PAR)).expect("copy the GDTF");
+    std::os::unix::fs::symlink("../..", lib.join("a/b/up")).expect("a loop");
+    std::os::unix::fs::symlink(&lib, lib.join("a/again")).expect("another");
+    let out = dir.join("scene");
+    let started = Instant::now();
+    let printed = stdout(&run(&[
+        "import",
+        s(&fixtures().join(EOS_CSV)),
+        "--out",
+        s(&out),
+        "--fixtures",
+        s(&lib),
+    ]));
+    assert!(started.elapsed() < Duration::from_secs(30), "{printed}");
+    // The GDTF is found (once) through the loop: channels 11-12 are lights.
+    assert_eq!(channels(&scene_toml(&out)), [1, 2, 11, 12]);
+    // A folder deeper than the walk goes is a sentence.
+    let deep = dir.join("deep");
+    let mut d = deep.clone();
+    for _ in 0..40 {
+        d = d.join("d");
+    }
+    std::fs::create_dir_all(&d).expect("mkdir");
+    let out = dir.join("scene-deep");
+    refused_within(
+        &[
+            "import",
+            s(&fixtures().join(EOS_CSV)),
+            "--out",
+            s(&out),
+            "--fixtures",
+            s(&deep),
+        ],
+        &out,
+        Duration::from_secs(30),
+        &["--fixtures", "more than 32 folders deep"],
+    );
+}
+
+#[test]
+fn a_console_reporting_too_many_groups_is_refused_and_a_slow_one_is_bounded() {
+    let Some(huge) = FakeEos::start(&["--groups-reported", "100000000"]) else {
+        return;
+    };
+    let dir = temp_dir("import-eos-counts");
+    let out = dir.join("scene");
+    refused_within(
+        &["import", &huge.url("eos"), "--out", s(&out)],
+        &out,
+        Duration::from_secs(30),
+        &[
+            &huge.url("eos"),
+            "reports 100000000 groups",
+            "at most 100000",
+        ],
+    );
+    // A console that answers, but too slowly to ever finish: the whole read is bounded by
+    // 120 times --timeout.
+    let mut csv = String::from("START_CHANNELS\nCHANNEL,FIXTURE_TYPE,MANUFACTURER,ADDRESS,LABEL\n");
+    for c in 1..=400u32 {
+        csv += &format!("{c},Dimmer,Generic, 1/{c},D{c}\n");
+    }
+    csv += "END_CHANNELS\n";
+    let path = dir.join("slow.csv");
+    std::fs::write(&path, csv).expect("write");
+    let Some(slow) = FakeEos::serve(&path, &["--delay", "0.05"]) else {
+        return;
+    };
+    refused_within(
+        &[
+            "import",
+            &slow.url("eos"),
+            "--out",
+            s(&out),
+            "--timeout",
+            "0.1",
+        ],
+        &out,
+        Duration::from_secs(19),
+        &[&slow.url("eos"), "gave up after 12 s", "of 400 entries in"],
+    );
 }

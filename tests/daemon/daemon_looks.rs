@@ -146,3 +146,158 @@ fn corrupt_state_files_are_kept_aside_and_the_daemon_starts() {
     d.restart();
     assert_eq!(d.looks(), vec![(2, "again".to_string())]);
 }
+
+/// Numbers the state files hold are checked on restore: one that is not finite (`1e39`
+/// reads as infinity) or out of range is dropped and named with its file, and the rest is
+/// restored, each file kept aside as a copy. The live look goes on the wire, a generate
+/// gives finite levels, and the next start reads every file whole (nothing set aside).
+#[test]
+fn numbers_not_finite_or_out_of_range_are_dropped_and_the_rest_restored() {
+    let mut d = Daemon::start("looks-numbers");
+    d.ok("/vo/light/1/level", vec![int(40)], "/vo/light");
+    d.ok("/vo/light/2/level", vec![int(60)], "/vo/light");
+    d.ok(
+        "/vo/light/3/color",
+        vec![float(1.0), float(0.0), float(0.5)],
+        "/vo/light",
+    );
+    d.ok("/vo/light/3/intensity", vec![float(0.8)], "/vo/light");
+    d.ok(
+        "/vo/look/save",
+        vec![int(1), string("one")],
+        "/vo/look/saved",
+    );
+    d.ok(
+        "/vo/look/save",
+        vec![int(2), string("two")],
+        "/vo/look/saved",
+    );
+    d.add_objective("warm.png", "both");
+    d.add_objective("cool.png", "both");
+    d.ok("/vo/fade", vec![float(1.5)], "/vo/fade");
+    d.ok("/vo/master", vec![float(0.5)], "/vo/master");
+    let mut live = d.live();
+    let objectives = d.objectives();
+    assert!(d.terminate().success());
+
+    let state = d.state_dir();
+    let edit = |name: &str, change: &dyn Fn(&mut serde_json::Value)| {
+        let path = state.join(name);
+        let text = std::fs::read_to_string(&path).expect("a state file");
+        let mut v: serde_json::Value = serde_json::from_str(&text).expect("JSON");
+        change(&mut v);
+        std::fs::write(&path, v.to_string()).expect("write the state file");
+    };
+    // Light `ch`'s entry of a look file.
+    fn light(look: &mut serde_json::Value, ch: i32) -> &mut serde_json::Value {
+        let lights = look["lights"].as_array_mut().expect("lights");
+        lights
+            .iter_mut()
+            .find(|l| l["channel"] == ch)
+            .expect("the light's entry")
+    }
+    let huge = serde_json::json!(1e39);
+    edit("session.json", &|v| {
+        v["fade_s"] = huge.clone();
+        v["count"] = serde_json::json!(5000);
+        v["objectives"][1]["mean_l"] = huge.clone();
+    });
+    edit("live.json", &|v| {
+        v["master"] = huge.clone();
+        light(&mut v["live"], 2)["intensity"] = huge.clone();
+        light(&mut v["base"], 3)["color"][0] = serde_json::json!(1.5);
+    });
+    edit("looks.json", &|v| {
+        light(&mut v["looks"]["2"], 1)["intensity"] = huge.clone();
+    });
+    d.restart();
+
+    // Each lost value is named with its file; nothing else is.
+    let log = d.log_text();
+    let lost: Vec<&str> = log.lines().filter(|l| l.contains("not restored")).collect();
+    for (file, what) in [
+        ("session.json", "fade_s inf is not a finite number"),
+        ("session.json", "count 5000 is outside 1..=1000"),
+        (
+            "session.json",
+            "objective 2 (`cool.png`): mean_l inf is not a finite number",
+        ),
+        ("live.json", "master inf is not a finite number"),
+        (
+            "live.json",
+            "live look: light 2: intensity inf is not a finite number",
+        ),
+        (
+            "live.json",
+            "base look: light 3: colour [1.5, 0.0, 0.5] is outside 0..1",
+        ),
+        (
+            "looks.json",
+            "look 2: light 1: intensity inf is not a finite number",
+        ),
+    ] {
+        assert!(
+            lost.iter().any(|l| l.contains(file) && l.contains(what)),
+            "no line names {file}: {what}:\n{log}"
+        );
+    }
+    assert_eq!(lost.len(), 7, "{lost:#?}");
+    // The rest is restored: light 2 is left out (off), the defaults stand for the others.
+    live[1].intensity = 0.0;
+    assert!(
+        same_look(&d.live(), &live, 1e-6),
+        "{:?} vs {live:?}",
+        d.live()
+    );
+    for proto in PROTOS {
+        d.wire.wait_look(proto, &live);
+    }
+    let status = d.status();
+    assert_eq!((status.master, status.fade), (1.0, 0.0), "{status:?}");
+    assert_eq!(d.objectives(), objectives[..1]);
+    assert_eq!(
+        d.looks(),
+        vec![(1, "one".to_string()), (2, "two".to_string())]
+    );
+    let aside = |tag: &str| -> Vec<String> {
+        let mut names: Vec<String> = std::fs::read_dir(&state)
+            .expect("the state folder")
+            .map(|e| {
+                e.expect("an entry")
+                    .file_name()
+                    .to_string_lossy()
+                    .into_owned()
+            })
+            .filter(|n| n.contains(tag))
+            .map(|n| n[..n.find('.').expect("a name")].to_string())
+            .collect();
+        names.sort();
+        names
+    };
+    assert_eq!(aside(".partial-"), ["live", "looks", "session"]);
+    d.ok("/vo/look/recall", vec![int(2)], "/vo/look/recalled");
+    assert_eq!(d.live()[0].intensity, 0.0, "look 2 lost light 1");
+
+    // A generate from what was restored gives levels, and a pick of it is saved whole.
+    d.generate();
+    d.ok("/vo/pick", vec![int(1)], "/vo/picked");
+    let picked = d.live();
+    assert!(
+        picked
+            .iter()
+            .all(|l| l.intensity.is_finite() && l.color.iter().all(|c| c.is_finite())),
+        "{picked:?}"
+    );
+    assert!(d.terminate().success());
+    d.restart();
+    assert_eq!(aside(".corrupt-"), Vec::<String>::new(), "{}", d.log());
+    let log = d.log_text();
+    assert!(!log.contains("not restored"), "{log}");
+    assert!(
+        same_look(&d.live(), &picked, 1e-6),
+        "{:?} vs {picked:?}",
+        d.live()
+    );
+    assert_eq!(d.objectives(), objectives[..1]);
+    assert_eq!(d.looks().len(), 2);
+}

@@ -21,9 +21,12 @@ console serves the same patch the CSV holds. Messages are built with python-osc;
 framing (OSC 1.0 length prefix, or SLIP with --slip) is written here.
 
 Usage: fake_eos.py --csv FILE [--group LABEL=1-2,11 ...] [--slip] [--hang-after N]
+                   [--groups-reported N] [--delay S]
 Prints the port it listens on (127.0.0.1), then serves one connection.
 --hang-after N: answers N patch indexes, sends the first half of the next reply, then
 stays silent (the connection open) until the client goes away.
+--groups-reported N: answers the group count with N whatever groups it has.
+--delay S: waits S seconds before each patch reply (a console that answers, slowly).
 """
 
 import argparse
@@ -31,6 +34,7 @@ import csv
 import socket
 import struct
 import sys
+import time
 
 from pythonosc.osc_message_builder import OscMessageBuilder
 from pythonosc.osc_message import OscMessage
@@ -152,6 +156,8 @@ def main():
     ap.add_argument("--group", action="append", default=[])
     ap.add_argument("--slip", action="store_true")
     ap.add_argument("--hang-after", type=int)
+    ap.add_argument("--groups-reported", type=int)
+    ap.add_argument("--delay", type=float, default=0.0)
     a = ap.parse_args()
     parts = read_csv(a.csv)
     groups = []
@@ -179,6 +185,7 @@ def main():
             args = [i, uid(i + 1), p["label"], p["manufacturer"], p["model"], p["address"],
                     p["address"], 0, ""] + [""] * 10 + [p["parts"], p["end"]]
             base = "/eos/out/get/patch/%d/%d" % (p["channel"], p["part"])
+            time.sleep(a.delay)
             if a.hang_after is not None and answered == a.hang_after:
                 link.send("%s/list/0/%d" % (base, len(args)), args[:9])
                 hung = True
@@ -186,7 +193,8 @@ def main():
             link.split(base, args, 9)
             answered += 1
         elif address == "/eos/get/group/count":
-            link.send("/eos/out/get/group/count", [len(groups)])
+            reported = len(groups) if a.groups_reported is None else a.groups_reported
+            link.send("/eos/out/get/group/count", [reported])
         elif address.startswith("/eos/get/group/index/"):
             i = int(address.rsplit("/", 1)[1])
             label, chans = groups[i]

@@ -41,6 +41,8 @@ Environment:
                          number, each universe's 512 slots as hex, each light's level
   FAKE_GPHOTO2_BODY      `second`: a body built differently from the first in every
                          step that turns light into a file (below)
+  FAKE_GPHOTO2_RAW_DECLARES  WxH: each DNG's main IFD declares W x H pixels over its
+                         real (small) data, as a broken or hostile file does
 
 Each frame is rendered (render_frame) from the scene scaled by the exposure through a
 simple camera response with clipping, and written as a JPEG whose EXIF holds the
@@ -73,6 +75,7 @@ camera it was not tuned on (class SecondBody):
 
 import json
 import os
+import struct
 import sys
 import time
 from fractions import Fraction
@@ -207,6 +210,23 @@ CAMERA_RGB = [[0.75, 0.20, 0.05], [0.12, 0.76, 0.12], [0.03, 0.22, 0.75]]
 RAW_BLACK, RAW_WHITE = 600, 15000
 # IEC 61966-2-1: linear sRGB (D65) to CIE XYZ.
 SRGB_TO_XYZ = [[0.4124, 0.3576, 0.1805], [0.2126, 0.7152, 0.0722], [0.0193, 0.1192, 0.9505]]
+
+
+def declare_size(name, size):
+    """Makes the DNG at `name` declare `size` (WxH) in its main IFD's ImageWidth and
+    ImageLength (as LONGs), its data left as it is."""
+    w, h = (int(v) for v in size.split("x"))
+    with open(name, "r+b") as f:
+        data = bytearray(f.read())
+        endian = "<" if data[:2] == b"II" else ">"
+        ifd = struct.unpack(endian + "I", data[4:8])[0]
+        count = struct.unpack(endian + "H", data[ifd:ifd + 2])[0]
+        for e in range(ifd + 2, ifd + 2 + 12 * count, 12):
+            tag = struct.unpack(endian + "H", data[e:e + 2])[0]
+            if tag in (256, 257):
+                data[e + 2:e + 12] = struct.pack(endian + "HII", 4, 1, w if tag == 256 else h)
+        f.seek(0)
+        f.write(data)
 
 
 def mosaic_of(camera, pattern):
@@ -577,6 +597,8 @@ def capture(state, filename, force):
             image.save(name, "JPEG", exif=exif, **cam.jpeg_options)
         else:
             cam.dng(name, signal, exposure, iso, f_number, state)
+            if os.environ.get("FAKE_GPHOTO2_RAW_DECLARES"):
+                declare_size(name, os.environ["FAKE_GPHOTO2_RAW_DECLARES"])
         print("Deleting file %s on the camera" % on_camera)
 
 

@@ -138,15 +138,57 @@ pub(crate) const SRGB_TO_XYZ: [[f64; 3]; 3] = [
     [0.0193, 0.1192, 0.9505],
 ];
 
+/// The most pixels a side of a camera raw frame: past the largest sensors made (a
+/// 150-megapixel back is 14204 pixels wide).
+pub const MAX_RAW_SIDE: usize = 32768;
+
+/// The most pixels of a camera raw frame in all (256 megapixels: 512 MB of 16-bit
+/// samples as it is decoded).
+pub const MAX_RAW_PIXELS: usize = 256 << 20;
+
+/// The first image size (width, height) over [`MAX_RAW_SIDE`] or [`MAX_RAW_PIXELS`] that
+/// the TIFF structure of a TIFF-based raw file (DNG, CR2, NEF, ARW, PEF, ...) declares in
+/// any of its IFDs, read before the decoder allocates for it; `None` when none is, or the
+/// file is not TIFF-based (its decoder's own checks apply).
+fn oversized(source: &rawler::rawsource::RawSource) -> Option<(usize, usize)> {
+    use rawler::formats::tiff::GenericTiffReader;
+    use rawler::formats::tiff::reader::TiffReader;
+    use rawler::tags::TiffCommonTag;
+    let tiff = GenericTiffReader::new(&mut source.reader(), 0, 0, None, &[]).ok()?;
+    tiff.find_ifds_with_tag(TiffCommonTag::ImageWidth)
+        .into_iter()
+        .map(|ifd| {
+            let side = |tag| ifd.get_entry(tag).map_or(0, |e| e.force_usize(0));
+            (
+                side(TiffCommonTag::ImageWidth),
+                side(TiffCommonTag::ImageLength),
+            )
+        })
+        .find(|&(w, h)| {
+            w > MAX_RAW_SIDE || h > MAX_RAW_SIDE || w.saturating_mul(h) > MAX_RAW_PIXELS
+        })
+}
+
 /// A camera raw file through `rawler`. Its decoders panic on some malformed files, so the
 /// decode runs inside `catch_unwind`: a bad file is a sentence, never the end of a capture.
 fn camera_raw(path: &Path, exposure: visobjd_hdr::Exposure) -> Result<DecodedShot, String> {
     use rawler::rawimage::{RawImageData, RawPhotometricInterpretation};
     let name = path.display();
     let hint = "capture with --format jpeg, or convert the camera's raw files to DNG";
-    let raw = std::panic::catch_unwind(|| rawler::decode_file(path))
+    let unreadable = |e: &dyn std::fmt::Display| {
+        format!("{name}: not a raw file the decoder reads ({e}); {hint}")
+    };
+    let source = rawler::rawsource::RawSource::new(path).map_err(|e| unreadable(&e))?;
+    if let Some((w, h)) = oversized(&source) {
+        return Err(format!(
+            "{name}: declares {w}x{h} pixels; a raw frame may have at most {MAX_RAW_SIDE} a side and {} megapixels; {hint}",
+            MAX_RAW_PIXELS >> 20
+        ));
+    }
+    let params = rawler::decoders::RawDecodeParams::default();
+    let raw = std::panic::catch_unwind(|| rawler::decode(&source, &params))
         .map_err(|_| format!("{name}: the raw decoder failed on this file; {hint}"))?
-        .map_err(|e| format!("{name}: not a raw file the decoder reads ({e}); {hint}"))?;
+        .map_err(|e| unreadable(&e))?;
     let RawImageData::Integer(data) = &raw.data else {
         return Err(format!(
             "{name}: floating-point raw data is not read; {hint}"
@@ -384,6 +426,44 @@ mod tests {
                 "{name}: {e}"
             );
         }
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    /// A few hundred bytes of DNG whose header declares 100000x100000 pixels is refused
+    /// by its header, before the decoder allocates 20 GB for it, naming the limit.
+    #[test]
+    fn a_raw_file_declaring_too_many_pixels_is_refused_before_decoding() {
+        let dir = std::env::temp_dir().join(format!("visobjd-huge-raw-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("temp dir");
+        let path = dir.join("huge.dng");
+        crate::sim::write_raw(&path, 4, 4, &[[0.5; 3]; 16], 0.01).expect("write a DNG");
+        let mut bytes = std::fs::read(&path).expect("read it back");
+        // The main IFD's ImageWidth and ImageLength become LONG 100000.
+        let at =
+            |i: usize| u32::from_le_bytes([bytes[i], bytes[i + 1], bytes[i + 2], bytes[i + 3]]);
+        let ifd = at(4) as usize;
+        let entries = usize::from(u16::from_le_bytes([bytes[ifd], bytes[ifd + 1]]));
+        for e in (0..entries).map(|k| ifd + 2 + 12 * k) {
+            if matches!(u16::from_le_bytes([bytes[e], bytes[e + 1]]), 256 | 257) {
+                bytes[e + 2..e + 4].copy_from_slice(&4u16.to_le_bytes());
+                bytes[e + 4..e + 8].copy_from_slice(&1u32.to_le_bytes());
+                bytes[e + 8..e + 12].copy_from_slice(&100_000u32.to_le_bytes());
+            }
+        }
+        std::fs::write(&path, &bytes).expect("write the DNG");
+        assert!(bytes.len() < 1000, "{} bytes", bytes.len());
+        let exposure = visobjd_hdr::Exposure {
+            seconds: 0.01,
+            iso: 100.0,
+            f_number: 8.0,
+        };
+        let Err(e) = load(&path, exposure) else {
+            panic!("a 100000x100000 frame was read");
+        };
+        assert!(
+            e.contains("huge.dng: declares 100000x100000 pixels; a raw frame may have at most 32768 a side and 256 megapixels"),
+            "{e}"
+        );
         std::fs::remove_dir_all(&dir).ok();
     }
 }

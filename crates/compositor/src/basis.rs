@@ -273,25 +273,53 @@ pub struct RgbImage {
     pub pixels: Vec<[f32; 3]>,
 }
 
+/// The most pixels a side of an image [`read_exr`] reads: far past any camera or render a
+/// basis is made from, and what a header must not exceed before a pixel is read.
+pub const MAX_SIDE: usize = 16384;
+
+/// The most pixels in all an image [`read_exr`] reads (64 megapixels, 768 MB as it is
+/// decoded), so a header cannot ask for more memory than the machine has.
+pub const MAX_PIXELS: usize = 64 << 20;
+
 /// Reads an OpenEXR file's first RGB(A) layer (half or float, scanline or tiled).
 ///
-/// Decoding runs under `catch_unwind`: a hostile file must produce an error, never take
-/// the daemon down.
+/// The headers are read first, and a layer of more than [`MAX_SIDE`] pixels a side or
+/// [`MAX_PIXELS`] in all is refused before anything is allocated for it. Decoding runs
+/// under `catch_unwind`: a hostile file must produce an error, never take the daemon down.
 pub fn read_exr(path: &Path) -> Result<RgbImage, String> {
-    let owned = path.to_path_buf();
+    use exr::prelude::traits::{ReadChannels, ReadLayers};
+    use std::io::{BufReader, Seek};
+    let mut file = std::fs::File::open(path).map_err(|e| describe_exr_error(e.into()))?;
+    let meta = exr::meta::MetaData::read_from_buffered(BufReader::new(&file), false)
+        .map_err(describe_exr_error)?;
+    for header in &meta.headers {
+        let (w, h) = (header.layer_size.0, header.layer_size.1);
+        if w > MAX_SIDE || h > MAX_SIDE || w.saturating_mul(h) > MAX_PIXELS {
+            return Err(format!(
+                "is {w}x{h} pixels; a basis image may have at most {MAX_SIDE} a side and {} megapixels",
+                MAX_PIXELS >> 20
+            ));
+        }
+    }
+    file.rewind().map_err(|e| describe_exr_error(e.into()))?;
     let result = std::panic::catch_unwind(move || {
-        exr::prelude::read_first_rgba_layer_from_file(
-            &owned,
-            |size, _| RgbImage {
-                width: size.0,
-                height: size.1,
-                pixels: vec![[0.0; 3]; size.0 * size.1],
-            },
-            |img: &mut RgbImage, pos, (r, g, b, _a): (f32, f32, f32, f32)| {
-                let i = pos.1 * img.width + pos.0;
-                img.pixels[i] = [r, g, b];
-            },
-        )
+        exr::prelude::read()
+            .no_deep_data()
+            .largest_resolution_level()
+            .rgba_channels(
+                |size, _| RgbImage {
+                    width: size.0,
+                    height: size.1,
+                    pixels: vec![[0.0; 3]; size.0 * size.1],
+                },
+                |img: &mut RgbImage, pos, (r, g, b, _a): (f32, f32, f32, f32)| {
+                    let i = pos.1 * img.width + pos.0;
+                    img.pixels[i] = [r, g, b];
+                },
+            )
+            .first_valid_layer()
+            .all_attributes()
+            .from_buffered(BufReader::new(file))
     });
     match result {
         Ok(Ok(image)) => {

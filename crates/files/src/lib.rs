@@ -2,6 +2,7 @@
 //! (temp file, fsync, rename, fsync of the folder), so a reader only ever sees the old or
 //! the new version; a file that does not parse is moved aside, never deleted.
 
+mod finite;
 mod lock;
 
 pub use lock::FolderLock;
@@ -60,8 +61,16 @@ fn write_via_temp(
     result
 }
 
-/// Serialises `value` as pretty JSON and writes it atomically.
+/// Serialises `value` as pretty JSON and writes it atomically. A value holding a number
+/// that is not finite is refused (`InvalidData`, naming where it sits) and nothing is
+/// written: JSON would hold `null` there, and the next read would set the file aside.
 pub fn save_json<T: Serialize>(path: &Path, value: &T) -> std::io::Result<()> {
+    if let Some(what) = finite::first_non_finite(value) {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!("{what}, not a finite number: not written, the previous file is kept"),
+        ));
+    }
     let text = serde_json::to_vec_pretty(value).map_err(std::io::Error::other)?;
     write_atomic(path, &text)
 }
@@ -196,6 +205,23 @@ mod tests {
             .map(|e| e.unwrap().file_name())
             .collect();
         assert_eq!(names.len(), 2, "{names:?}");
+    }
+
+    #[test]
+    fn a_value_that_is_not_finite_is_not_written_and_the_file_stays() {
+        let d = dir("finite");
+        let p = d.join("live.json");
+        save_json(&p, &vec![0.5f32, 1.0]).unwrap();
+        let e = save_json(&p, &vec![0.5f32, f32::NAN]).unwrap_err();
+        assert_eq!(e.kind(), std::io::ErrorKind::InvalidData);
+        assert!(
+            e.to_string().starts_with("[1] is NaN, not a finite number"),
+            "{e}"
+        );
+        match load_json::<Vec<f32>>(&p) {
+            Loaded::Ok(v) => assert_eq!(v, vec![0.5, 1.0]),
+            other => panic!("{other:?}"),
+        }
     }
 
     #[test]

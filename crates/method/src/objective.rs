@@ -459,27 +459,51 @@ impl From<&Objective> for ObjectiveRecord {
 }
 
 impl ObjectiveRecord {
-    /// The objective again; None if the record was edited into something invalid.
-    pub fn to_objective(&self) -> Option<Objective> {
+    /// The objective again; Err names what was edited into something invalid: aspects or
+    /// a region that do not parse, or an analysis number that is not finite (a palette
+    /// weight outside 0..1), which would put NaN into every generate.
+    pub fn to_objective(&self) -> Result<Objective, String> {
         let [x0, y0, x1, y1] = self.region;
-        Some(Objective {
+        let finite = |name: &str, v: f32| {
+            if v.is_finite() {
+                Ok(v)
+            } else {
+                Err(format!("{name} {v} is not a finite number"))
+            }
+        };
+        let palette = self
+            .palette
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                if p.color.iter().any(|c| !c.is_finite()) {
+                    return Err(format!(
+                        "palette colour {} {:?} is not finite",
+                        i + 1,
+                        p.color
+                    ));
+                }
+                let weight = finite(&format!("palette weight {}", i + 1), p.weight)?;
+                if !(0.0..=1.0).contains(&weight) {
+                    return Err(format!("palette weight {} {weight} is outside 0..1", i + 1));
+                }
+                Ok(PaletteColor {
+                    color: p.color,
+                    weight,
+                })
+            })
+            .collect::<Result<_, String>>()?;
+        Ok(Objective {
             image: self.image.clone(),
-            aspects: Aspects::parse(&self.aspects).ok()?,
-            region: Region::new(x0, y0, x1, y1).ok()?,
+            aspects: Aspects::parse(&self.aspects)?,
+            region: Region::new(x0, y0, x1, y1)?,
             analysis: Analysis {
                 stats: IntensityStats {
-                    mean_l: self.mean_l,
-                    key_l: self.key_l,
-                    bright: self.bright,
+                    mean_l: finite("mean_l", self.mean_l)?,
+                    key_l: finite("key_l", self.key_l)?,
+                    bright: finite("bright", self.bright)?,
                 },
-                palette: self
-                    .palette
-                    .iter()
-                    .map(|p| PaletteColor {
-                        color: p.color,
-                        weight: p.weight,
-                    })
-                    .collect(),
+                palette,
             },
         })
     }

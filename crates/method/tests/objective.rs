@@ -131,3 +131,40 @@ fn pixel_spans_hold_exactly_the_pixels_whose_centres_are_inside() {
         }
     }
 }
+
+#[test]
+fn a_record_of_any_analysis_reads_back_and_one_not_finite_is_refused() {
+    use visobjd_method::objective::{Aspects, Objective, ObjectiveRecord};
+    for img in [
+        image(40, 20, |_, _| [255; 3]),
+        image(40, 20, |_, _| [0; 3]),
+        image(40, 20, |x, y| [(x * 6) as u8, (y * 12) as u8, 255]),
+    ] {
+        let o = Objective {
+            image: "a.png".into(),
+            aspects: Aspects::Both,
+            region: Region::FULL,
+            analysis: analyze(&img, Region::FULL, 5),
+        };
+        let record = ObjectiveRecord::from(&o);
+        assert_eq!(record.to_objective(), Ok(o));
+        let mut bad = record.clone();
+        bad.key_l = f32::INFINITY;
+        assert_eq!(
+            bad.to_objective(),
+            Err("key_l inf is not a finite number".into())
+        );
+        let mut bad = record.clone();
+        bad.palette[0].weight = f32::NAN;
+        assert_eq!(
+            bad.to_objective(),
+            Err("palette weight 1 NaN is not a finite number".into())
+        );
+        let mut bad = record;
+        bad.palette[0].weight = 2.0;
+        assert_eq!(
+            bad.to_objective(),
+            Err("palette weight 1 2 is outside 0..1".into())
+        );
+    }
+}

@@ -185,84 +185,119 @@ fn text_of(bytes: &[u8]) -> String {
     }
 }
 
-/// CSV records (RFC 4180 quoting: `"a,b"`, `""` for a quote, line breaks inside quotes)
-/// with the line each starts on; `Err` names the line of an unterminated quote.
-fn records(text: &str) -> Result<Vec<(usize, Vec<String>)>, usize> {
-    let mut out = Vec::new();
-    let mut fields = Vec::new();
-    let mut field = String::new();
-    let mut quoted = false;
-    let mut line = 1;
-    let mut start = 1;
-    let mut chars = text.chars().peekable();
-    while let Some(c) = chars.next() {
-        if quoted {
-            match c {
-                '"' if chars.peek() == Some(&'"') => {
-                    chars.next();
-                    field.push('"');
+/// CSV records (RFC 4180 quoting: `"a,b"`, `""` for a quote, line breaks inside quotes),
+/// one at a time with the line each starts on, so only the rows kept take memory; `Err`
+/// names the line of an unterminated quote (and ends the records).
+struct Records<'a> {
+    chars: std::iter::Peekable<std::str::Chars<'a>>,
+    line: usize,
+}
+
+fn records(text: &str) -> Records<'_> {
+    Records {
+        chars: text.chars().peekable(),
+        line: 1,
+    }
+}
+
+impl Iterator for Records<'_> {
+    type Item = Result<(usize, Vec<String>), usize>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        let start = self.line;
+        let mut fields = Vec::new();
+        let mut field = String::new();
+        let mut quoted = false;
+        while let Some(c) = self.chars.next() {
+            if quoted {
+                match c {
+                    '"' if self.chars.peek() == Some(&'"') => {
+                        self.chars.next();
+                        field.push('"');
+                    }
+                    '"' => quoted = false,
+                    '\n' => {
+                        self.line += 1;
+                        field.push('\n');
+                    }
+                    other => field.push(other),
                 }
-                '"' => quoted = false,
+                continue;
+            }
+            match c {
+                '"' => quoted = true,
+                ',' => fields.push(std::mem::take(&mut field)),
+                '\r' => {}
                 '\n' => {
-                    line += 1;
-                    field.push('\n');
+                    fields.push(field);
+                    self.line += 1;
+                    return Some(Ok((start, fields)));
                 }
                 other => field.push(other),
             }
-            continue;
         }
-        match c {
-            '"' => quoted = true,
-            ',' => fields.push(std::mem::take(&mut field)),
-            '\r' => {}
-            '\n' => {
-                fields.push(std::mem::take(&mut field));
-                out.push((start, std::mem::take(&mut fields)));
-                line += 1;
-                start = line;
-            }
-            other => field.push(other),
+        if quoted {
+            return Some(Err(start));
         }
+        if !field.is_empty() || !fields.is_empty() {
+            fields.push(field);
+            return Some(Ok((start, fields)));
+        }
+        None
     }
-    if quoted {
-        return Err(start);
-    }
-    if !field.is_empty() || !fields.is_empty() {
-        fields.push(field);
-        out.push((start, fields));
-    }
-    Ok(out)
 }
 
-/// Reads an Eos CSV export's patch (its `START_CHANNELS` block). Errors name the file and
-/// the line.
+/// The most channel parts a patch may have (a CSV export's channel rows, or a console's
+/// patch count), and the most groups a console may report: far past any show (Eos
+/// numbers channels up to 99999), and what bounds an import's memory and time.
+pub const MAX_ENTRIES: usize = 100_000;
+
+/// The largest CSV export read (a show's export is a few MB).
+pub const MAX_CSV_BYTES: usize = 64 << 20;
+
+/// Reads an Eos CSV export's patch (its `START_CHANNELS` block), row by row: at most
+/// [`MAX_CSV_BYTES`] and [`MAX_ENTRIES`] channel parts. Errors name the file and the line.
 pub fn parse_csv(file: &str, bytes: &[u8]) -> Result<EosPatch, RigError> {
-    let text = text_of(bytes);
-    let rows = records(&text).map_err(|line| {
-        RigError::new(
-            file,
-            Some(format!("line {line}")),
-            "a quoted field is never closed",
-        )
-    })?;
-    let at = |line: usize, m: String| RigError::new(file, Some(format!("line {line}")), m);
-    let first = |r: &[String]| r.first().map(|s| s.trim().to_string()).unwrap_or_default();
-    let Some(begin) = rows.iter().position(|(_, r)| first(r) == "START_CHANNELS") else {
+    if bytes.len() > MAX_CSV_BYTES {
         return Err(RigError::new(
             file,
             None,
-            "no START_CHANNELS block: not an Eos patch export (export the show as CSV with the patch)",
+            format!(
+                "is {} MB; an Eos CSV export read is at most {} MB",
+                bytes.len() >> 20,
+                MAX_CSV_BYTES >> 20
+            ),
         ));
+    }
+    let text = text_of(bytes);
+    let at = |line: usize, m: String| RigError::new(file, Some(format!("line {line}")), m);
+    let unclosed = |line: usize| at(line, "a quoted field is never closed".into());
+    let first = |r: &[String]| r.first().map(|s| s.trim().to_string()).unwrap_or_default();
+    let mut rows = records(&text);
+    let begin_line = loop {
+        match rows.next() {
+            None => {
+                return Err(RigError::new(
+                    file,
+                    None,
+                    "no START_CHANNELS block: not an Eos patch export (export the show as CSV with the patch)",
+                ));
+            }
+            Some(Err(line)) => return Err(unclosed(line)),
+            Some(Ok((line, r))) if first(&r) == "START_CHANNELS" => break line,
+            Some(Ok(_)) => {}
+        }
     };
-    let (begin_line, _) = rows[begin];
-    let Some((header_line, header)) = rows.get(begin + 1) else {
-        return Err(at(begin_line, "START_CHANNELS has no column row".into()));
+    let (header_line, header) = match rows.next() {
+        None => return Err(at(begin_line, "START_CHANNELS has no column row".into())),
+        Some(Err(line)) => return Err(unclosed(line)),
+        Some(Ok(row)) => row,
     };
     let column = |name: &str| -> Result<usize, RigError> {
         header
             .iter()
             .position(|h| h.trim() == name)
-            .ok_or_else(|| at(*header_line, format!("the column row has no {name}")))
+            .ok_or_else(|| at(header_line, format!("the column row has no {name}")))
     };
     let (c_channel, c_type, c_maker, c_address, c_label) = (
         column("CHANNEL")?,
@@ -274,14 +309,20 @@ pub fn parse_csv(file: &str, bytes: &[u8]) -> Result<EosPatch, RigError> {
     let mut patch = EosPatch::default();
     let mut parts: BTreeMap<u32, u32> = BTreeMap::new();
     let mut ended = false;
-    for (line, row) in &rows[begin + 2..] {
-        let line = *line;
-        if first(row) == "END_CHANNELS" {
+    for row in rows {
+        let (line, row) = row.map_err(unclosed)?;
+        if first(&row) == "END_CHANNELS" {
             ended = true;
             break;
         }
         if row.iter().all(|f| f.trim().is_empty()) {
             continue;
+        }
+        if patch.channels.len() == MAX_ENTRIES {
+            return Err(at(
+                line,
+                format!("more than {MAX_ENTRIES} channel parts: not a patch this import reads"),
+            ));
         }
         let get = |i: usize| row.get(i).map(|s| s.trim()).unwrap_or("");
         if row.len() < header.len() {
@@ -414,7 +455,7 @@ pub struct Lists {
 
 /// The longest list accepted (a patch reply has 21 fields; a group's channel list one per
 /// range).
-const MAX_LIST: usize = 100_000;
+const MAX_LIST: usize = MAX_ENTRIES;
 
 impl Lists {
     /// Adds a message's arguments at `piece`; returns the whole list once every position
@@ -627,16 +668,16 @@ mod tests {
 
     #[test]
     fn csv_records_keep_quoted_commas_and_lines() {
-        let r = records("a,\"b,c\",\"d\"\"e\"\r\n\"x\ny\",z\nlast").unwrap_or_default();
+        let r: Vec<_> = records("a,\"b,c\",\"d\"\"e\"\r\n\"x\ny\",z\nlast").collect();
         assert_eq!(
             r,
             vec![
-                (1, vec!["a".into(), "b,c".into(), "d\"e".into()]),
-                (2, vec!["x\ny".into(), "z".into()]),
-                (4, vec!["last".into()]),
+                Ok((1, vec!["a".into(), "b,c".into(), "d\"e".into()])),
+                Ok((2, vec!["x\ny".into(), "z".into()])),
+                Ok((4, vec!["last".into()])),
             ]
         );
-        assert_eq!(records("a,\"b\nc"), Err(1));
+        assert_eq!(records("a,\"b\nc").collect::<Vec<_>>(), [Err(1)]);
     }
 
     #[test]

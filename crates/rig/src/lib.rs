@@ -422,10 +422,39 @@ fn zip_entry(file: &str, archive: &mut Archive, name: &str) -> Result<Vec<u8>, R
     Ok(out)
 }
 
-/// `bytes` as an XML document.
+/// The deepest nesting of elements an MVR or GDTF document may have: real plots and
+/// fixture types nest a few levels (layers, groups, geometries), and the walks over them
+/// recurse once per level, so a deeper file is refused before it can overflow the stack.
+pub const MAX_XML_DEPTH: usize = 64;
+
+/// `bytes` as an XML document, its elements nested at most [`MAX_XML_DEPTH`] deep.
 fn xml<'a>(file: &str, text: &'a str) -> Result<roxmltree::Document<'a>, RigError> {
-    roxmltree::Document::parse(text)
-        .map_err(|e| RigError::new(file, None, format!("not well-formed XML: {e}")))
+    let doc = roxmltree::Document::parse(text)
+        .map_err(|e| RigError::new(file, None, format!("not well-formed XML: {e}")))?;
+    // Counted without recursion, in document order: a node's parent comes before it.
+    let mut depths: Vec<usize> = Vec::new();
+    for node in doc.descendants() {
+        let at = |n: roxmltree::Node| n.id().get() as usize;
+        let depth = node
+            .parent()
+            .and_then(|p| depths.get(at(p)).copied())
+            .unwrap_or(0)
+            + usize::from(node.is_element());
+        if depth > MAX_XML_DEPTH {
+            return Err(RigError::new(
+                file,
+                None,
+                format!(
+                    "elements nested more than {MAX_XML_DEPTH} deep: not a plot or fixture type this import reads"
+                ),
+            ));
+        }
+        if depths.len() <= at(node) {
+            depths.resize(at(node) + 1, 0);
+        }
+        depths[at(node)] = depth;
+    }
+    Ok(doc)
 }
 
 /// `bytes` as UTF-8 text (a BOM is dropped).

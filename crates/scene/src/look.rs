@@ -90,40 +90,82 @@ impl LookFile {
     }
 
     /// The look this file describes on `scene`; refuses channels the scene lacks and
-    /// values out of range, naming them.
+    /// values out of range, naming the first.
     pub fn to_look(&self, scene: &Scene) -> Result<Look, String> {
+        let (look, mut refused) = self.fit(scene);
+        if refused.is_empty() {
+            Ok(look)
+        } else {
+            Err(refused.swap_remove(0))
+        }
+    }
+
+    /// The look this file describes on `scene`, leaving out (off) each light it cannot
+    /// take, with a sentence for each: what a restore uses, so one bad entry does not
+    /// take the rest of the stage with it.
+    pub fn fit(&self, scene: &Scene) -> (Look, Vec<String>) {
         let mut look = Look::off(scene.lights.len());
+        let mut refused = Vec::new();
         for e in &self.lights {
-            let i = scene.light_index(e.channel).ok_or_else(|| {
-                format!(
+            let Some(i) = scene.light_index(e.channel) else {
+                refused.push(format!(
                     "light {} is not in the scene ({})",
                     e.channel,
                     scene.channel_range()
-                )
-            })?;
-            if !(0.0..=1.0).contains(&e.intensity) {
-                return Err(format!(
-                    "light {}: intensity {} is outside 0..1",
-                    e.channel, e.intensity
                 ));
-            }
-            let color = e.color.unwrap_or([1.0; 3]);
-            if color.iter().any(|c| !(0.0..=1.0).contains(c)) {
-                return Err(format!(
-                    "light {}: colour {:?} is outside 0..1",
-                    e.channel, color
-                ));
+                continue;
+            };
+            if let Err(why) = e.check() {
+                refused.push(why);
+                continue;
             }
             look.levels[i] = Level {
                 intensity: e.intensity,
-                color: if scene.profile(i).has_colour() {
-                    color
-                } else {
-                    [1.0; 3]
+                color: match (scene.profile(i).has_colour(), e.color) {
+                    (true, Some(c)) => c,
+                    _ => [1.0; 3],
                 },
             };
         }
-        Ok(look)
+        (look, refused)
+    }
+
+    /// Leaves out the entries whose numbers are not levels ([`LightEntry::check`]), with
+    /// a sentence for each; the channels are not checked (a saved look outlives a patch).
+    pub fn drop_invalid(&mut self) -> Vec<String> {
+        let mut refused = Vec::new();
+        self.lights.retain(|e| match e.check() {
+            Ok(()) => true,
+            Err(why) => {
+                refused.push(why);
+                false
+            }
+        });
+        refused
+    }
+}
+
+impl LightEntry {
+    /// Why this entry's numbers are not a level (intensity and colour finite, in 0..1),
+    /// naming the light and the value.
+    pub fn check(&self) -> Result<(), String> {
+        let problem = |v: f32| match v {
+            v if !v.is_finite() => Some("is not a finite number"),
+            v if !(0.0..=1.0).contains(&v) => Some("is outside 0..1"),
+            _ => None,
+        };
+        if let Some(p) = problem(self.intensity) {
+            return Err(format!(
+                "light {}: intensity {} {p}",
+                self.channel, self.intensity
+            ));
+        }
+        if let Some(c) = self.color
+            && let Some(p) = c.iter().find_map(|&v| problem(v))
+        {
+            return Err(format!("light {}: colour {c:?} {p}", self.channel));
+        }
+        Ok(())
     }
 }
 

@@ -28,6 +28,9 @@ const PORT_LENGTH_PREFIX: u16 = 3032;
 const PORT_SLIP: u16 = 3037;
 /// Index requests out at once (a few kB of replies each way).
 const WINDOW: usize = 32;
+/// The whole read may take this many times `--timeout` (10 minutes by default): a
+/// console that keeps answering, but too slowly to finish, is given up on.
+const TOTAL_TIMEOUTS: u32 = 120;
 
 /// Where and how to reach a console named by `source`; `None` when `source` is not an
 /// `eos://` or `eos+slip://` address.
@@ -72,6 +75,8 @@ struct EosConnection<'a> {
     queue: std::collections::VecDeque<OscMessage>,
     /// The longest the console may be silent.
     quiet: Duration,
+    /// When the whole read gives up ([`TOTAL_TIMEOUTS`] times `quiet` from the start).
+    give_up: Instant,
 }
 
 impl EosConnection<'_> {
@@ -90,16 +95,25 @@ impl EosConnection<'_> {
             .with_context(|| format!("{}: cannot send to Eos", self.source))
     }
 
-    /// The next message, waiting at most `quiet` for it; `what` names what is being read.
+    /// The next message, waiting at most `quiet` for it, and never past `give_up`; `what`
+    /// names what is being read.
     fn next(&mut self, what: &dyn Fn() -> String) -> anyhow::Result<OscMessage> {
         let deadline = Instant::now() + self.quiet;
         let mut buf = [0u8; 8192];
         loop {
+            let now = Instant::now();
+            if now >= self.give_up {
+                bail!(
+                    "{}: gave up after {} s ({TOTAL_TIMEOUTS} times --timeout) reading {}: the console answers, but too slowly",
+                    self.source,
+                    (self.quiet * TOTAL_TIMEOUTS).as_secs_f64(),
+                    what()
+                );
+            }
             if let Some(m) = self.queue.pop_front() {
                 return Ok(m);
             }
-            let left = deadline.saturating_duration_since(Instant::now());
-            if left.is_zero() {
+            if now >= deadline {
                 bail!(
                     "{}: Eos stopped answering while reading {} (nothing for {} s)",
                     self.source,
@@ -107,6 +121,7 @@ impl EosConnection<'_> {
                     self.quiet.as_secs_f64()
                 );
             }
+            let left = deadline.min(self.give_up) - now;
             self.stream
                 .set_read_timeout(Some(left))
                 .with_context(|| format!("{}: cannot set a read timeout", self.source))?;
@@ -204,7 +219,8 @@ impl EosConnection<'_> {
         }
     }
 
-    /// Sends `count` and returns the number the console answers with.
+    /// Sends `count` and returns the number the console answers with, at most
+    /// [`eos::MAX_ENTRIES`].
     fn count(&mut self, kind: &str) -> anyhow::Result<usize> {
         self.send(&[format!("/eos/get/{kind}/count")])?;
         let want = match kind {
@@ -216,7 +232,7 @@ impl EosConnection<'_> {
             if eos::reply(&m.addr) != want {
                 continue;
             }
-            return m
+            let n = m
                 .args
                 .first()
                 .map(arg)
@@ -224,7 +240,20 @@ impl EosConnection<'_> {
                     Arg::Int(n) => usize::try_from(n).ok(),
                     _ => None,
                 })
-                .with_context(|| format!("{}: {} carries no count", self.source, m.addr));
+                .with_context(|| format!("{}: {} carries no count", self.source, m.addr))?;
+            if n > eos::MAX_ENTRIES {
+                let what = if kind == "patch" {
+                    "channel parts"
+                } else {
+                    "groups"
+                };
+                bail!(
+                    "{}: Eos reports {n} {what}; the import reads at most {}",
+                    self.source,
+                    eos::MAX_ENTRIES
+                );
+            }
+            return Ok(n);
         }
     }
 }
@@ -272,6 +301,7 @@ pub fn read(
         decoder: Decoder::with_framing(framing, framing::MAX_FRAME),
         queue: Default::default(),
         quiet,
+        give_up: Instant::now() + quiet * TOTAL_TIMEOUTS,
     };
 
     let n = c.count("patch")?;
@@ -303,10 +333,9 @@ pub fn read(
     // By group index: the group's number, its list, its channel list.
     let mut mains: BTreeMap<usize, (String, Vec<Arg>)> = BTreeMap::new();
     let mut members: BTreeMap<usize, Vec<Arg>> = BTreeMap::new();
-    while (0..g).any(|i| !mains.contains_key(&i) || !members.contains_key(&i)) {
-        let done = (0..g)
-            .filter(|i| mains.contains_key(i) && members.contains_key(i))
-            .count();
+    // Groups with both their lists in.
+    let mut done = 0;
+    while done < g {
         let ((number, channels), i, list) =
             c.next_list("group", &mut lists, &mut sent, done, g, |r| match r {
                 Reply::Group {
@@ -320,10 +349,13 @@ pub fn read(
                 )),
                 _ => None,
             })?;
-        if channels {
-            members.insert(i, list);
+        let first = if channels {
+            members.insert(i, list).is_none()
         } else {
-            mains.insert(i, (number, list));
+            mains.insert(i, (number, list)).is_none()
+        };
+        if first && mains.contains_key(&i) && members.contains_key(&i) {
+            done += 1;
         }
     }
     let mut groups: Vec<EosGroup> = Vec::new();
