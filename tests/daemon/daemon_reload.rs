@@ -11,8 +11,8 @@ use std::time::{Duration, Instant};
 use rosc::OscMessage;
 
 use crate::common::daemon::{
-    Daemon, DmxPacket, GAP, Osc, PATIENCE, PERIOD, PROTOS, Proto, UNIVERSES, float, int,
-    status_part, text,
+    Daemon, DmxPacket, GAP, LightLevel, Osc, PATIENCE, PERIOD, PROTOS, Proto, UNIVERSES, float,
+    int, status_part, text,
 };
 
 /// Waits (bounded) until the latest sACN frame of universe 1 satisfies `want`.
@@ -61,6 +61,21 @@ fn longest_interval(d: &Daemon, from: Instant) -> Duration {
         .map(|(p, u)| d.wire.max_gap(p, u, from, to))
         .max()
         .unwrap_or_default()
+}
+
+/// Stops the daemon (SIGTERM: the last fader move is written), lets `change` break a file,
+/// starts it again and waits until `live` is back on both protocols; returns when the
+/// restart began.
+fn restart_with(d: &mut Daemon, live: &[LightLevel], change: impl FnOnce()) -> Instant {
+    d.terminate();
+    change();
+    d.wire.drained_after(Instant::now());
+    let restarted = Instant::now();
+    d.restart();
+    for proto in PROTOS {
+        d.wire.wait_look(proto, live);
+    }
+    restarted
 }
 
 fn status_message(d: &mut Daemon) -> OscMessage {
@@ -147,16 +162,11 @@ fn a_bad_basis_image_leaves_its_light_out_and_the_rest_works() {
     let mut d = Daemon::start("reload-bad-image");
     d.ok("/vo/light/3/intensity", vec![float(0.5)], "/vo/light");
     let live = d.live();
-    d.terminate();
     let image = d.dir.join("scene/basis/003.exr");
     let good = std::fs::read(&image).expect("basis 003");
-    std::fs::write(&image, b"not an EXR at all").expect("corrupt it");
-    d.wire.drained_after(Instant::now());
-    let restarted = Instant::now();
-    d.restart();
-    for proto in PROTOS {
-        d.wire.wait_look(proto, &live);
-    }
+    let restarted = restart_with(&mut d, &live, || {
+        std::fs::write(&image, b"not an EXR at all").expect("corrupt it");
+    });
     let status = status_message(&mut d);
     let unseen = status_part(&status, "unseen").expect("an unseen part");
     assert_eq!(unseen[0], int(1), "{unseen:?}");
@@ -188,15 +198,11 @@ fn a_broken_scene_keeps_the_saved_look_on_the_wire_and_loads_once_fixed() {
     let mut d = Daemon::start("reload-bad-scene");
     d.ok("/vo/group/side/intensity", vec![float(0.6)], "/vo/group");
     let live = d.live();
-    d.terminate();
     let good = std::fs::read_to_string(scene_file(&d)).expect("scene.toml");
-    std::fs::write(scene_file(&d), "[[light]]\nchannel = \"one\"\n").expect("break it");
-    d.wire.drained_after(Instant::now());
-    let restarted = Instant::now();
-    d.restart();
-    for proto in PROTOS {
-        d.wire.wait_look(proto, &live);
-    }
+    let broken = scene_file(&d);
+    let restarted = restart_with(&mut d, &live, || {
+        std::fs::write(&broken, "[[light]]\nchannel = \"one\"\n").expect("break it");
+    });
     let status = status_message(&mut d);
     let problem = status_part(&status, "problem").expect("a problem part");
     let sentence = text(&problem[0]);
