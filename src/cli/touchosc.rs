@@ -39,5 +39,29 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         crate::touchosc::LOOK_SLOTS,
         args.out.display()
     );
+    left_off(
+        "references",
+        "objectives",
+        &refs,
+        crate::touchosc::MAX_REFERENCES,
+    );
+    left_off(
+        "groups",
+        "constraints and transfer",
+        &groups,
+        crate::touchosc::MAX_GROUPS,
+    );
     Ok(())
+}
+
+/// Names what a page has no room for (the first `room` of `all` get a control), so a
+/// technician knows which ones the tablet cannot reach: a console macro or `visobjd send`
+/// still can.
+fn left_off(what: &str, page: &str, all: &[String], room: usize) {
+    if let Some(rest) = all.get(room..).filter(|r| !r.is_empty()) {
+        tracing::warn!(
+            "touchosc: the {page} page has room for {room} {what}; left off: {} (reach them with /vo/... from a console or visobjd send, or keep fewer)",
+            rest.join(", ")
+        );
+    }
 }

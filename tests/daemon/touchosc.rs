@@ -503,3 +503,34 @@ fn feedback_pushes_light_the_live_entry_and_describe_the_state() {
     d.ok("/vo/objective/clear", vec![], "/vo/objective/cleared");
     d.refused("/vo/objective/last/region", vec![]);
 }
+
+#[test]
+fn the_generator_names_the_references_a_page_has_no_room_for() {
+    let dir = temp_dir("touchosc-left-off");
+    let refs = dir.join("refs");
+    std::fs::create_dir_all(&refs).expect("mkdir");
+    let demo = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/demo/refs");
+    let one = std::fs::read_dir(&demo)
+        .expect("demo refs")
+        .map(|e| e.expect("entry").path())
+        .find(|p| p.extension().is_some_and(|e| e == "png"))
+        .expect("a PNG");
+    let names: Vec<String> = (1..=14).map(|i| format!("ref{i:02}.png")).collect();
+    for n in &names {
+        std::fs::copy(&one, refs.join(n)).expect("copy");
+    }
+    let run = Command::new(bin())
+        .args(["touchosc", "--refs"])
+        .arg(&refs)
+        .arg("--out")
+        .arg(dir.join("t.tosc"))
+        .output()
+        .expect("visobjd runs");
+    assert!(run.status.success(), "{run:?}");
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(
+        err.contains("room for 12 references; left off: ref13.png, ref14.png"),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(dir);
+}
