@@ -66,30 +66,38 @@ pub fn parse(file: &str, bytes: &[u8]) -> Result<Rig, RigError> {
                 profile: Err("the MVR gives it no GDTFSpec".into()),
             }
         } else {
-            if !types.contains_key(&f.spec) {
-                let entry = [f.spec.clone(), format!("{}.gdtf", f.spec)]
-                    .into_iter()
-                    .find(|n| archive.index_for_name(n).is_some())
-                    .ok_or_else(|| {
+            let entry = [f.spec.clone(), format!("{}.gdtf", f.spec)]
+                .into_iter()
+                .find(|n| archive.index_for_name(n).is_some());
+            match entry {
+                // A type the plot names but does not carry: the rest of the plot imports,
+                // and this type is listed once with its channels (`Rig::needs_profiles`).
+                None => FixtureType {
+                    name: f.spec.clone(),
+                    footprint: None,
+                    profile: Err(format!(
+                        "its GDTFSpec `{}` is not in the MVR: export the plot with its GDTF files, or give the type a profile",
+                        f.spec
+                    )),
+                },
+                Some(entry) => {
+                    if !types.contains_key(&f.spec) {
+                        let gdtf = crate::zip_entry(file, &mut archive, &entry)?;
+                        let ty = GdtfType::parse(&entry, &gdtf).map_err(|e| {
+                            RigError::new(file, who.clone(), format!("its GDTF {e}"))
+                        })?;
+                        types.insert(f.spec.clone(), ty);
+                    }
+                    let ty = &types[&f.spec];
+                    ty.fixture_type(&f.mode).map_err(|e| {
                         RigError::new(
                             file,
-                            who.clone(),
-                            format!("its GDTFSpec `{}` is not in the MVR", f.spec),
+                            who_ch.clone(),
+                            format!("its GDTF `{}` {}", f.spec, e.message),
                         )
-                    })?;
-                let gdtf = crate::zip_entry(file, &mut archive, &entry)?;
-                let ty = GdtfType::parse(&entry, &gdtf)
-                    .map_err(|e| RigError::new(file, who.clone(), format!("its GDTF {e}")))?;
-                types.insert(f.spec.clone(), ty);
+                    })?
+                }
             }
-            let ty = &types[&f.spec];
-            ty.fixture_type(&f.mode).map_err(|e| {
-                RigError::new(
-                    file,
-                    who_ch.clone(),
-                    format!("its GDTF `{}` {}", f.spec, e.message),
-                )
-            })?
         };
         rig.add(
             Fixture {
