@@ -722,7 +722,6 @@ fn a_rewire_moves_the_rig_without_a_gap_and_ends_only_the_streams_it_drops() {
         port: second.local_addr().expect("addr").port(),
         ..config.sacn[0].clone()
     });
-    let before = Instant::now();
     let lit = Look {
         levels: vec![
             Level {
@@ -760,10 +759,6 @@ fn a_rewire_moves_the_rig_without_a_gap_and_ends_only_the_streams_it_drops() {
             "a gap of {gap:?} across the rewire"
         );
     }
-    assert!(
-        one.first()
-            .is_some_and(|(t, _)| *t - before < Duration::from_millis(50))
-    );
     // Universe 2, no longer patched, ends as at a shutdown: three terminations, then nothing.
     let two: Vec<&Sacn> = all
         .iter()
