@@ -169,7 +169,12 @@ impl Request {
             [arg] => number_of(arg) == Some(0.0),
             _ => false,
         };
-        zero && TRIGGERS.iter().any(|t| self.matches(t).is_some())
+        zero && self.is_trigger()
+    }
+
+    /// Whether the address is one of [`TRIGGERS`].
+    fn is_trigger(&self) -> bool {
+        TRIGGERS.iter().any(|t| self.matches(t).is_some())
     }
 }
 
