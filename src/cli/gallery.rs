@@ -177,6 +177,9 @@ pub fn run(args: Args, matches: &ArgMatches) -> anyhow::Result<()> {
         },
         args.out.display()
     );
+    for note in generation.notes(&objectives) {
+        eprintln!("gallery: {note}");
+    }
     Ok(())
 }
 

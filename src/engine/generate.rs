@@ -143,6 +143,14 @@ impl Engine {
                 return;
             };
             let reply = generated(&generation, ms, seed);
+            let notes: Vec<OscMessage> = generation
+                .notes(&inputs.objectives)
+                .into_iter()
+                .map(|note| {
+                    tracing::warn!("generate {serial}: {note}");
+                    msg("/vo/note", vec![OscType::String(note)])
+                })
+                .collect();
             let s = engine.session();
             if !inputs.current(&engine) {
                 drop((s, running));
@@ -163,8 +171,10 @@ impl Engine {
             };
             // Subscribers first: whoever acts on the reply (a pick) has its pushes come
             // after this gallery's, never before them.
-            engine.install_gallery(s, gallery, vec![progress(1.0), reply.clone()]);
-            answer(Ok(vec![reply]));
+            let mut first = vec![progress(1.0), reply.clone()];
+            first.extend(notes.iter().cloned());
+            engine.install_gallery(s, gallery, first);
+            answer(Ok(std::iter::once(reply).chain(notes).collect()));
             engine.poke_explorer();
         });
         if let Err(e) = spawned {

@@ -92,6 +92,8 @@ impl GalleryFile {
             threshold: self.threshold,
             draws: self.draws,
             exhausted: self.exhausted,
+            // Notes go to the requester of the main's generate, not to a backup.
+            lit_for_color: Vec::new(),
             thumbnails: std::sync::Arc::new([]),
         };
         Ok(Gallery {
@@ -262,6 +264,7 @@ mod tests {
                 threshold: 9.5,
                 draws: 11,
                 exhausted: false,
+                lit_for_color: Vec::new(),
                 thumbnails: std::sync::Arc::new([]),
             },
             seed: 77,

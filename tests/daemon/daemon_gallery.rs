@@ -490,3 +490,38 @@ fn constraints_reply_and_refuse() {
         d.refused(addr, args);
     }
 }
+
+#[test]
+fn a_colour_only_objective_on_a_dark_stage_lights_its_colours_and_says_so() {
+    let mut d = Daemon::start("gal-colour-dark");
+    assert!(d.live().iter().all(|l| l.intensity == 0.0), "a dark start");
+    d.add_objective("warm.png", "color");
+    let r = d.generate();
+    // The note follows the reply it explains, before anything sent after the generate.
+    let notes: Vec<String> = d
+        .fence()
+        .into_iter()
+        .filter(|m| m.addr == "/vo/note")
+        .map(|m| text(&m.args[0]))
+        .collect();
+    assert_eq!(notes.len(), 1, "{notes:?}\n{}", d.log());
+    assert!(
+        notes[0].contains("warm.png") && notes[0].contains("colour only"),
+        "{notes:?}"
+    );
+    assert!(num(&r.args[1]) as i32 > 1, "more than one look: {r:?}");
+    let lit = d.candidate(1, 1);
+    assert!(lit.iter().any(|l| l.intensity > 0.0), "{lit:?}");
+    assert!(
+        lit.iter()
+            .any(|l| fixture(l.ch).has_colour() && l.intensity > 0.0 && l.color != [1.0; 3]),
+        "the colours show on lit lights: {lit:?}"
+    );
+    // With light in the base, intensities are the designer's: no note.
+    d.ok("/vo/pick", vec![int(1)], "/vo/picked");
+    d.generate();
+    assert!(
+        d.fence().iter().all(|m| m.addr != "/vo/note"),
+        "no note over a lit base"
+    );
+}

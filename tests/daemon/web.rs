@@ -493,6 +493,35 @@ fn a_tap_in_the_browser_puts_the_entry_live() {
     );
 }
 
+#[test]
+fn the_page_shows_what_a_generate_notes() {
+    let Some(browser) = chromium() else {
+        return tools::missing("Chromium", "is not installed", "apt-get install chromium");
+    };
+    let (mut d, addr) = start("web-note");
+    // Colour only on the dark start: the generate sets intensity too and says so.
+    d.add_objective("cool.png", "color");
+    let (_browser, mut page) = open(&browser, &format!("http://{addr}/"), "note");
+    page.wait(
+        "document.getElementById('status')?.textContent ?? ''",
+        "showed the daemon's status",
+        |v| v.as_str().is_some_and(|s| s.contains("no gallery yet")),
+    );
+    assert_eq!(
+        page.eval("document.getElementById('generate').click(); true"),
+        true
+    );
+    page.wait(
+        "document.getElementById('error').textContent",
+        "showed the generate's note",
+        |v| {
+            v.as_str()
+                .is_some_and(|s| s.contains("cool.png asks for colour only"))
+        },
+    );
+    assert!(d.status().candidates > 0);
+}
+
 /// An 8x8 PNG of one colour, as bytes.
 fn png(rgb: [u8; 3]) -> Vec<u8> {
     let img = image::RgbImage::from_pixel(8, 8, image::Rgb(rgb));

@@ -232,12 +232,46 @@ pub struct Generation {
     pub draws: usize,
     /// True if the draw bound ran out before `count` candidates were accepted.
     pub exhausted: bool,
+    /// Colour-only objectives (indices in request order) that took their reference's
+    /// intensity too, the base leaving their lights dark ([`Plan::lit_for_color`]).
+    pub lit_for_color: Vec<usize>,
     /// Thumbnails of the representatives, one per entry, so the gallery can be shown as
     /// soon as it exists (filled by [`crate::stage::Stage::generate`]; members' thumbnails
     /// are rendered on demand with [`crate::stage::Stage::thumbnails`]).
     /// Shared and never changed once made, so a reader (the web gallery) takes them
     /// without copying and without holding the session.
     pub thumbnails: std::sync::Arc<[image::RgbImage]>,
+}
+
+impl Generation {
+    /// What a user should be told about this gallery besides its size, one sentence each:
+    /// colour-only objectives that had to set intensity too, and a gallery with no light in
+    /// it. `objectives` are the request's, in its order.
+    pub fn notes(&self, objectives: &[crate::objective::Objective]) -> Vec<String> {
+        let mut notes: Vec<String> = self
+            .lit_for_color
+            .iter()
+            .filter_map(|&i| objectives.get(i))
+            .map(|o| {
+                format!(
+                    "{} asks for colour only, and the base look leaves the lights it colours dark: \
+                     their intensity follows the reference too (give them a level first to keep \
+                     your own, or set its aspects to both)",
+                    o.image
+                )
+            })
+            .collect();
+        let dark = |look: &Look| look.levels.iter().all(|l| l.intensity <= 0.0);
+        if self.candidates.iter().all(dark) {
+            notes.push(
+                "every candidate is dark: the objectives reach no light they may raise (each is \
+                 locked, held off or outside every region); unlock a group, widen a region or \
+                 give the base look some light"
+                    .into(),
+            );
+        }
+        notes
+    }
 }
 
 /// Candidates are sampled and proxied in batches of at most this many; the decisions are
@@ -314,6 +348,7 @@ pub fn generate<T: Send>(
     } = drawing;
     let generation = Generation {
         exhausted: candidates.len() < size.count,
+        lit_for_color: plan.lit_for_color().to_vec(),
         candidates,
         entries: clustering.entries().to_vec(),
         threshold: clustering.threshold(),

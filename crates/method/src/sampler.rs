@@ -163,12 +163,18 @@ pub struct Plan {
     ratios: Vec<RatioTree>,
     /// Free colour-capable lights with a saturation range.
     saturation: Vec<(usize, Saturation)>,
+    /// Targets (indices in the order given) that ask for colour only over lights the base
+    /// leaves dark and no intensity target reaches: they take their reference's intensity
+    /// too, as a colour on a dark light shows nothing.
+    lit_for_color: Vec<usize>,
 }
 
 impl Plan {
     /// Prepares the objectives: intensity aspects first, then colour; within each, larger
     /// regions first so that a region inside another wins the lights both select. Lights
-    /// held off count as locked at 0; ratios and saturation ranges apply after sampling.
+    /// held off count as locked at 0; ratios and saturation ranges apply after sampling. A
+    /// colour-only target whose free colour lights are all dark in the base and outside
+    /// every intensity target is sampled for intensity too ([`Plan::lit_for_color`]).
     pub fn new(
         rig: &LightGroups,
         constraints: &Constraints,
@@ -186,14 +192,15 @@ impl Plan {
             start.levels[l].intensity = 0.0;
         }
         let (constraints, base) = (&held, &start);
-        let mut order: Vec<&Target> = targets.iter().collect();
-        order.sort_by(|a, b| b.area.total_cmp(&a.area));
+        let lit_for_color = dark_color_targets(rig, constraints, targets, base);
+        let mut order: Vec<(usize, &Target)> = targets.iter().enumerate().collect();
+        order.sort_by(|a, b| b.1.area.total_cmp(&a.1.area));
         let group_of = rig.group_of();
         let mut intensity = Vec::new();
         let mut color = Vec::new();
-        for t in order {
+        for (i, t) in order {
             let units = units(rig, constraints, t);
-            if t.aspects.intensity() {
+            if t.aspects.intensity() || lit_for_color.contains(&i) {
                 intensity.push(intensity_step(constraints, &group_of, t, &units, base));
             }
             if t.aspects.color() && !t.palette.is_empty() {
@@ -211,7 +218,14 @@ impl Plan {
                 .filter(|(_, s)| !s.is_any())
                 .collect(),
             off,
+            lit_for_color,
         }
+    }
+
+    /// Colour-only targets (indices in the order given to [`Plan::new`]) that take their
+    /// reference's intensity as well, because the base leaves their lights dark.
+    pub fn lit_for_color(&self) -> &[usize] {
+        &self.lit_for_color
     }
 
     /// One candidate: the base look with every reached, unlocked light resampled, lights
@@ -255,6 +269,33 @@ impl Plan {
         }
         look
     }
+}
+
+/// The colour-only targets with a palette whose free colour-capable lights are all at 0 in
+/// `base` and selected by no intensity target: their colours would fall on dark lights.
+fn dark_color_targets(
+    rig: &LightGroups,
+    constraints: &Constraints,
+    targets: &[Target],
+    base: &Look,
+) -> Vec<usize> {
+    let reached = |l: usize| {
+        targets
+            .iter()
+            .any(|t| t.aspects.intensity() && t.selected[l])
+    };
+    targets
+        .iter()
+        .enumerate()
+        .filter(|(_, t)| t.aspects.color() && !t.aspects.intensity() && !t.palette.is_empty())
+        .filter(|(_, t)| {
+            let mut free = (0..rig.colored.len())
+                .filter(|&l| t.selected[l] && rig.colored[l] && !constraints.locked[l])
+                .peekable();
+            free.peek().is_some() && free.all(|l| base.levels[l].intensity <= 0.0 && !reached(l))
+        })
+        .map(|(i, _)| i)
+        .collect()
 }
 
 /// Number of keys over `units` sampled units: round(b L / 2) (paper 4.2.4).

@@ -273,6 +273,61 @@ fn colours_follow_their_weights_and_dimmers_stay_white() {
 }
 
 #[test]
+fn a_colour_only_objective_over_dark_lights_takes_the_references_intensity_too() {
+    let n = 12;
+    let r = rig(n);
+    let colour_only = |mean| {
+        let mut t = target(n, mean, 0.8, 0.3);
+        t.aspects = Aspects::Color;
+        t.palette = vec![PaletteColor {
+            color: [1.0, 0.0, 0.0],
+            weight: 1.0,
+        }];
+        t
+    };
+    let none = Constraints::none(&r);
+    // A dark base: without intensity the colours would fall on lights at 0.
+    let dark = Look::off(n);
+    let plan = Plan::new(&r, &none, &[colour_only(0.4)], &dark, Spread::default());
+    assert_eq!(plan.lit_for_color(), &[0]);
+    let mut rng = Rng::seed_from_u64(8);
+    let means: Vec<f32> = (0..300)
+        .map(|_| {
+            let look = plan.sample(&dark, &mut rng);
+            mean(&look.levels.iter().map(|l| l.intensity).collect::<Vec<_>>())
+        })
+        .collect();
+    assert!((mean(&means) - 0.4).abs() < 0.03, "{}", mean(&means));
+    // One lit light in its region: the base's intensities are the designer's, kept.
+    let mut lit = Look::off(n);
+    lit.levels[5].intensity = 0.3;
+    let plan = Plan::new(&r, &none, &[colour_only(0.4)], &lit, Spread::default());
+    assert!(plan.lit_for_color().is_empty());
+    assert_eq!(plan.sample(&lit, &mut rng).levels, {
+        let mut want = lit.levels.clone();
+        for l in &mut want {
+            l.color = [1.0, 0.0, 0.0];
+        }
+        want
+    });
+    // An intensity objective over the same lights sets them: colour stays colour only.
+    let intensity = target(n, 0.5, 0.8, 0.3);
+    let plan = Plan::new(
+        &r,
+        &none,
+        &[intensity, colour_only(0.4)],
+        &dark,
+        Spread::default(),
+    );
+    assert!(plan.lit_for_color().is_empty());
+    // Every light locked: nothing to light, nothing claimed.
+    let mut locked = Constraints::none(&r);
+    locked.locked = vec![true; n];
+    let plan = Plan::new(&r, &locked, &[colour_only(0.4)], &dark, Spread::default());
+    assert!(plan.lit_for_color().is_empty());
+}
+
+#[test]
 fn palette_colours_take_full_value() {
     let c = visobjd_method::sampler::full_value([0.2, 0.1, 0.05]);
     assert!((c[0] - 1.0).abs() < 1e-6, "{c:?}");
