@@ -355,6 +355,38 @@ fn an_mvr_missing_one_fixture_type_imports_the_rest_and_names_the_type_once() {
 }
 
 #[test]
+fn an_mvr_whose_gdtf_lacks_a_mode_imports_the_rest_and_says_it_once_with_the_channels() {
+    let dir = temp_dir("import-missing-mode");
+    let mvr = dir.join("plot.mvr");
+    let wrong = (10..=13)
+        .map(|c| {
+            fixture(
+                &format!("Wash {c}"),
+                &c.to_string(),
+                None,
+                "Mode 9",
+                &(c * 10).to_string(),
+            )
+        })
+        .collect::<String>();
+    write_mvr(
+        &mvr,
+        &(fixture("FOH 1", "1", None, "Default", "1") + &wrong),
+    );
+    let scene = dir.join("scene");
+    let out = stdout(&run(&["import", s(&mvr), "--out", s(&scene)]));
+    assert_eq!(channels(&scene_toml(&scene)), [1], "{out}");
+    let lines: Vec<&str> = out.lines().filter(|l| l.contains("Mode 9")).collect();
+    assert_eq!(lines.len(), 1, "said once: {out}");
+    assert!(
+        lines[0].contains(&format!(
+            "needs a profile: {PAR} (Mode 9), channels 10-13: its GDTF `{PAR}` has no DMX mode `Mode 9` (modes: `Default`): fix or replace the GDTF"
+        )),
+        "{out}"
+    );
+}
+
+#[test]
 fn wrong_input_is_one_line_naming_the_file_and_the_fixture_and_changes_nothing() {
     let dir = temp_dir("import-errors");
     let mvr = dir.join("plot.mvr");
@@ -365,13 +397,19 @@ fn wrong_input_is_one_line_naming_the_file_and_the_fixture_and_changes_nothing()
     let bad = dir.join("bad.mvr");
     let plot_file = s(&bad).to_string();
 
+    // A plot none of whose fixtures becomes a light, into a new scene: the GDTF lacks the
+    // mode. (Into a scene that has the light, it is kept: see the missing-mode test.)
+    write_mvr(&bad, &fixture("FOH 1", "1", None, "Nope", "1"));
+    let fresh = dir.join("fresh");
+    fails_with(
+        &run(&["import", s(&bad), "--out", s(&fresh)]),
+        &[&format!(
+            "{plot_file}: no fixture became a light (needs a profile: {PAR} (Nope), channel 1: its GDTF `{PAR}` has no DMX mode `Nope` (modes: `Default`): fix or replace the GDTF in the MVR, or give the type a profile)"
+        )],
+    );
+    assert!(!fresh.exists(), "nothing written");
+
     let cases: Vec<(String, Vec<String>)> = vec![
-        (
-            fixture("FOH 1", "1", None, "Nope", "1"),
-            vec![format!(
-                "{plot_file}: channel 1 \"FOH 1\": its GDTF `{PAR}` has no DMX mode `Nope` (modes: `Default`)"
-            )],
-        ),
         (
             fixture("FOH 1", "1", None, "Default", "1")
                 + &fixture("FOH 2", "2", None, "Default", "3"),
@@ -418,11 +456,12 @@ fn wrong_input_is_one_line_naming_the_file_and_the_fixture_and_changes_nothing()
     zip.write_all(b"not a zip").expect("write");
     zip.finish().expect("finish");
     fails_with(
-        &run(&["import", s(&bad), "--out", s(&scene)]),
+        &run(&["import", s(&bad), "--out", s(&fresh)]),
         &[&format!(
-            "{plot_file}: fixture \"FOH 1\": its GDTF {PAR}: not a readable zip"
+            "{plot_file}: no fixture became a light (needs a profile: {PAR} (Default), channel 1: its GDTF {PAR}: not a readable zip"
         )],
     );
+    assert!(!fresh.exists(), "nothing written");
 
     // A broken zip (the plot cut short), and the real but truncated GDTF.
     let good = std::fs::read(&mvr).expect("mvr");

@@ -28,10 +28,9 @@ pub fn parse(file: &str, bytes: &[u8]) -> Result<Rig, RigError> {
     let mut nameless = 0;
     walk(root, None, &mut nameless, &mut found);
 
-    let mut types: HashMap<String, GdtfType> = HashMap::new();
+    let mut types: HashMap<String, Result<GdtfType, String>> = HashMap::new();
     let mut rig = Rig::default();
     for f in found {
-        let who = Some(format!("fixture \"{}\"", f.name));
         if f.multipatch {
             rig.skipped.push(format!(
                 "fixture \"{}\": a multipatch copy (its parent's channel drives it)",
@@ -80,22 +79,27 @@ pub fn parse(file: &str, bytes: &[u8]) -> Result<Rig, RigError> {
                         f.spec
                     )),
                 },
+                // A GDTF that does not read, or lacks the plot's mode, is the same: the
+                // type is listed once with its channels, and the rest imports.
                 Some(entry) => {
-                    if !types.contains_key(&f.spec) {
-                        let gdtf = crate::zip_entry(file, &mut archive, &entry)?;
-                        let ty = GdtfType::parse(&entry, &gdtf).map_err(|e| {
-                            RigError::new(file, who.clone(), format!("its GDTF {e}"))
-                        })?;
-                        types.insert(f.spec.clone(), ty);
+                    let ty = types.entry(f.spec.clone()).or_insert_with(|| {
+                        crate::zip_entry(file, &mut archive, &entry)
+                            .and_then(|gdtf| GdtfType::parse(&entry, &gdtf))
+                            .map_err(|e| format!("its GDTF {e}"))
+                    });
+                    let unusable = |why: String| FixtureType {
+                        name: format!("{} ({})", f.spec, f.mode),
+                        footprint: None,
+                        profile: Err(format!(
+                            "{why}: fix or replace the GDTF in the MVR, or give the type a profile"
+                        )),
+                    };
+                    match ty {
+                        Ok(ty) => ty.fixture_type(&f.mode).unwrap_or_else(|e| {
+                            unusable(format!("its GDTF `{}` {}", f.spec, e.message))
+                        }),
+                        Err(why) => unusable(why.clone()),
                     }
-                    let ty = &types[&f.spec];
-                    ty.fixture_type(&f.mode).map_err(|e| {
-                        RigError::new(
-                            file,
-                            who_ch.clone(),
-                            format!("its GDTF `{}` {}", f.spec, e.message),
-                        )
-                    })?
                 }
             }
         };
