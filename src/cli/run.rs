@@ -5,7 +5,8 @@
 //! by hand beside the service stops before it sends a frame; then the scene description
 //! (fast) and the saved live look, which the DMX output starts sending at once, before the
 //! basis images are read; only then does OSC answer. sACN receivers hold a source for
-//! 2.5 s, so a restart never drops the stage.
+//! 2.5 s, so a restart never drops the stage. A `SIGHUP` during all this reloads once the
+//! daemon answers.
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -40,6 +41,18 @@ pub struct Args {
 /// Runs the daemon until SIGINT or SIGTERM.
 pub fn run(args: Args) -> anyhow::Result<()> {
     super::start_compute_pool();
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .context("cannot start the async runtime")?;
+    // SIGHUP is watched from the first moment: one sent while the scene loads (its default
+    // action ends the process) is kept and reloads once the daemon answers.
+    let hangup = {
+        let _inside = runtime.enter();
+        tokio::signal::unix::signal(tokio::signal::unix::SignalKind::hangup())
+            .context("cannot watch SIGHUP")?
+    };
 
     let config = Config::load(&args.config).map_err(anyhow::Error::msg)?;
     std::fs::create_dir_all(&config.state_dir)
@@ -135,12 +148,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let engine = Arc::new(Engine::new(config.clone(), loaded, output, input, session)?);
 
-    let runtime = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        .enable_all()
-        .build()
-        .context("cannot start the async runtime")?;
-    let result = runtime.block_on(serve(&config, &engine, osc, web));
+    let result = runtime.block_on(serve(&config, &engine, osc, web, hangup));
     crate::shutdown::finish(&engine);
     result
 }
@@ -167,12 +175,7 @@ async fn watchdog(engine: Arc<Engine>, period: std::time::Duration) {
 }
 
 /// `SIGHUP` (what `systemctl reload` sends): [`Engine::reload`], off the async threads.
-async fn reload_on_hangup(engine: Arc<Engine>) {
-    let Ok(mut hangup) = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::hangup())
-    else {
-        tracing::error!("cannot listen for SIGHUP: reload with /vo/reload instead");
-        return;
-    };
+async fn reload_on_hangup(engine: Arc<Engine>, mut hangup: tokio::signal::unix::Signal) {
     while hangup.recv().await.is_some() {
         let engine = Arc::clone(&engine);
         // The reload logs (and tells systemd) its outcome itself.
@@ -211,6 +214,7 @@ async fn serve(
     engine: &Arc<Engine>,
     osc: Listeners,
     web: Option<std::net::TcpListener>,
+    hangup: tokio::signal::unix::Signal,
 ) -> anyhow::Result<()> {
     let runner = Runner::new(Arc::clone(engine));
     let server = Server::serve(osc, Arc::new(runner.clone()), Limits::default())
@@ -251,7 +255,7 @@ async fn serve(
     if let Some(period) = sd_notify::watchdog_enabled() {
         tasks.push(tokio::spawn(watchdog(Arc::clone(engine), period)));
     }
-    tasks.push(tokio::spawn(reload_on_hangup(Arc::clone(engine))));
+    tasks.push(tokio::spawn(reload_on_hangup(Arc::clone(engine), hangup)));
     tasks.push(tokio::spawn(retry_scene(Arc::clone(engine))));
     tasks.push(tokio::spawn(follow_config(
         engine.config_changes(),

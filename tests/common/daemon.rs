@@ -1294,6 +1294,12 @@ impl Daemon {
 
     /// Starts the process and waits until it answers `/vo/ping`.
     fn spawn(&mut self) -> Result<(), String> {
+        self.launch_child();
+        self.await_ready()
+    }
+
+    /// Starts the process.
+    fn launch_child(&mut self) {
         self.starts += 1;
         self.log = self.dir.join(format!("stderr-{}.log", self.starts));
         self.osc.log = self.log.clone();
@@ -1309,6 +1315,10 @@ impl Daemon {
         (self.launch)(&self.dir, &mut command);
         let child = command.spawn().expect("visobjd starts");
         self.child = Some(child);
+    }
+
+    /// Waits until the started process answers `/vo/ping`.
+    fn await_ready(&mut self) -> Result<(), String> {
         let end = Instant::now() + Duration::from_secs(10);
         let token = TOKEN.fetch_add(1, Ordering::Relaxed);
         while Instant::now() < end {
@@ -1462,6 +1472,19 @@ impl Daemon {
     pub fn restart(&mut self) {
         assert!(self.child.is_none(), "stop it first");
         if let Err(e) = self.spawn() {
+            panic!("the daemon did not restart: {e}");
+        }
+    }
+
+    /// [`Daemon::restart`], calling `at_first_frame` with the process id as soon as the
+    /// restarted daemon's first frames are on the wire (before it answers OSC).
+    pub fn restart_with_first_frames(&mut self, at_first_frame: impl FnOnce(u32)) {
+        assert!(self.child.is_none(), "stop it first");
+        let started = Instant::now();
+        self.launch_child();
+        self.wire.wait_frames_after(started, "the restart");
+        at_first_frame(self.pid());
+        if let Err(e) = self.await_ready() {
             panic!("the daemon did not restart: {e}");
         }
     }

@@ -11,9 +11,10 @@ use std::time::{Duration, Instant};
 use rosc::OscMessage;
 
 use crate::common::daemon::{
-    Daemon, DmxPacket, GAP, LightLevel, Osc, PATIENCE, PERIOD, PROTOS, Proto, UNIVERSES, float,
-    int, status_part, text,
+    Daemon, DmxPacket, GAP, LightLevel, Osc, PATIENCE, PERIOD, PROTOS, Proto, Setup, UNIVERSES,
+    float, int, status_part, text,
 };
+use visobjd_testkit::{TestLight, temp_dir, write_scene};
 
 /// Waits (bounded) until the latest sACN frame of universe 1 satisfies `want`.
 fn wait_sacn(d: &Daemon, what: &str, want: impl Fn(&DmxPacket) -> bool) {
@@ -38,9 +39,9 @@ fn first_frames_after(d: &Daemon, t: Instant) -> Instant {
         .expect("frames")
 }
 
-fn hangup(d: &Daemon) {
+fn hangup(pid: u32) {
     let ok = Command::new("kill")
-        .args(["-HUP", &d.pid().to_string()])
+        .args(["-HUP", &pid.to_string()])
         .status()
         .is_ok_and(|s| s.success());
     assert!(ok, "kill -HUP failed");
@@ -110,7 +111,7 @@ fn sighup_mid_show_moves_a_light_and_a_priority_without_a_dark_frame() {
     .expect("write config");
 
     let before = Instant::now();
-    hangup(&d);
+    hangup(d.pid());
     wait_sacn(&d, "moved light 2 to 1/30 at priority 120", |f| {
         f.priority == 120 && f.dmx[29] == level && f.dmx[1] == 0
     });
@@ -129,6 +130,78 @@ fn sighup_mid_show_moves_a_light_and_a_priority_without_a_dark_frame() {
 }
 
 #[test]
+fn a_sighup_while_the_daemon_starts_reloads_once_it_answers() {
+    // Large basis images, so that reading them takes a while after the first frame.
+    let lights: Vec<TestLight> = (1..=8u16)
+        .map(|ch| TestLight {
+            channel: u32::from(ch),
+            group: None,
+            profile: "dimmer",
+            universe: if ch <= 4 { 1 } else { 2 },
+            address: ch,
+            pixel: Box::new(move |x, _| {
+                if x / 240 == usize::from(ch - 1) {
+                    [0.5; 3]
+                } else {
+                    [0.0; 3]
+                }
+            }),
+        })
+        .collect();
+    let scene = write_scene(
+        &temp_dir("reload-early-hangup-scene").join("scene"),
+        1920,
+        1080,
+        &[],
+        &lights,
+    );
+    let mut d = Daemon::start_setup(
+        "reload-early-hangup",
+        Setup {
+            scene_from: Some(scene),
+            ..Setup::default()
+        },
+    );
+    d.ok("/vo/light/3/intensity", vec![float(0.7)], "/vo/light");
+    let live = d.live();
+    d.terminate();
+    // SIGHUP again and again from the moment the saved look is on the wire (the basis
+    // images still loading) until the daemon answers: its default action would end the
+    // process.
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let mut sender = None;
+    d.restart_with_first_frames(|pid| {
+        let stop = std::sync::Arc::clone(&stop);
+        sender = Some(std::thread::spawn(move || {
+            while !stop.load(std::sync::atomic::Ordering::SeqCst) {
+                hangup(pid);
+            }
+        }));
+    });
+    stop.store(true, std::sync::atomic::Ordering::SeqCst);
+    sender
+        .expect("the SIGHUP sender")
+        .join()
+        .expect("the SIGHUP sender ends");
+    let end = Instant::now() + PATIENCE;
+    while !d.log_text().contains("reloaded ") {
+        assert!(
+            d.alive(),
+            "the daemon ended on an early SIGHUP:\n{}",
+            d.log()
+        );
+        assert!(
+            Instant::now() < end,
+            "no reload after an early SIGHUP:\n{}",
+            d.log()
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    assert!(d.alive());
+    assert_eq!(d.live(), live);
+}
+
+#[test]
 fn a_broken_config_changes_nothing_and_vo_reload_applies_a_good_one() {
     let mut d = Daemon::start("reload-osc");
     let config = std::fs::read_to_string(d.config_path()).expect("config");
@@ -136,7 +209,7 @@ fn a_broken_config_changes_nothing_and_vo_reload_applies_a_good_one() {
     let why = d.err("/vo/reload", vec![]);
     assert!(why.starts_with("config not reloaded: "), "{why}");
     assert!(why.contains("everything stays as it was"), "{why}");
-    hangup(&d);
+    hangup(d.pid());
     // The same refusal by SIGHUP: the daemon logs it and runs on.
     d.fence();
     assert!(d.alive());
