@@ -1,5 +1,6 @@
 //! What an ETC Eos console sends with its OSC TX pointed at visobjd, and its selection:
-//! `/eos/out/...` (accepted without a reply; `/eos/out/active/chan` read),
+//! `/eos/out/...` (accepted without a reply; `/eos/out/active/chan` read, the command
+//! line echo and read-backs handed to a running export),
 //! `/vo/console/selection`, `/vo/console/selection/lock`, `/vo/console/selection/key` (the
 //! addresses say "console" for history's sake; the selection is always Eos's).
 //!
@@ -20,6 +21,9 @@ use visobjd_scene::Scene;
 pub enum Cmd {
     /// An implicit Eos message; `Some` for an active-channel report (its channel ranges).
     EosOut(Option<Vec<(u32, u32)>>),
+    /// A command line echo or a read-back: what an export over UDP waits for
+    /// (src/eos/record.rs).
+    EosAnswer(OscMessage),
     Selection,
     Lock(bool),
     Key(bool),
@@ -28,6 +32,13 @@ pub enum Cmd {
 impl Cmd {
     pub fn parse(req: &Request) -> Result<Option<Cmd>, String> {
         if req.segments.len() >= 2 && req.segments[0] == "eos" && req.segments[1] == "out" {
+            if req
+                .segments
+                .get(2)
+                .is_some_and(|s| s == "user" || s == "get")
+            {
+                return Ok(Some(Cmd::EosAnswer(req.message())));
+            }
             let active = req.matches("/eos/out/active/chan").is_some();
             let text = req.args().iter().find_map(|a| match a {
                 OscType::String(s) => Some(s.as_str()),
@@ -56,6 +67,10 @@ impl Cmd {
         let scene = &stage.scene;
         match self {
             Cmd::EosOut(None) => Ok(Vec::new()),
+            Cmd::EosAnswer(m) => {
+                cx.engine.eos_heard(m);
+                Ok(Vec::new())
+            }
             Cmd::EosOut(Some(ranges)) => {
                 let lights = lights_in(scene, &ranges);
                 cx.commit(|s| {

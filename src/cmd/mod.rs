@@ -16,6 +16,7 @@ mod backup;
 mod console;
 mod constraint;
 mod eos_in;
+mod eos_out;
 mod gallery;
 mod generate;
 mod live;
@@ -47,6 +48,7 @@ use visobjd_scene::look::{Look, LookFile};
 enum Command {
     Backup(backup::Cmd),
     EosIn(eos_in::Cmd),
+    EosOut(eos_out::Cmd),
     Objective(objective::Cmd),
     Constraint(constraint::Cmd),
     Console(console::Cmd),
@@ -78,6 +80,9 @@ impl Command {
         }
         if let Some(c) = eos_in::Cmd::parse(req)? {
             return Ok(Command::EosIn(c));
+        }
+        if let Some(c) = eos_out::Cmd::parse(req)? {
+            return Ok(Command::EosOut(c));
         }
         if let Some(c) = objective::Cmd::parse(req)? {
             return Ok(Command::Objective(c));
@@ -126,6 +131,7 @@ impl Command {
         match self {
             Command::Backup(_) => "backup",
             Command::EosIn(_) => "eos",
+            Command::EosOut(_) => "eos export",
             Command::Objective(_) => "objective",
             Command::Constraint(_) => "constraint",
             Command::Console(_) => "console",
@@ -144,6 +150,7 @@ impl Command {
         match self {
             Command::Backup(c) => c.apply(cx),
             Command::EosIn(c) => c.apply(cx),
+            Command::EosOut(c) => c.apply(cx),
             Command::Objective(c) => c.apply(cx),
             Command::Constraint(c) => c.apply(cx),
             Command::Console(c) => c.apply(cx),
@@ -164,7 +171,10 @@ impl Command {
     fn changes_state(&self) -> bool {
         match self {
             Command::Backup(c) => c.changes_state(),
-            Command::EosIn(c) => !matches!(c, eos_in::Cmd::Selection | eos_in::Cmd::EosOut(None)),
+            Command::EosIn(c) => !matches!(
+                c,
+                eos_in::Cmd::Selection | eos_in::Cmd::EosOut(None) | eos_in::Cmd::EosAnswer(_)
+            ),
             Command::Objective(c) => !matches!(
                 c,
                 objective::Cmd::Edit(objective::Edit::List | objective::Edit::Palette { .. })
@@ -177,7 +187,9 @@ impl Command {
             Command::Live(c) => !matches!(c, live::Cmd::Live),
             Command::Looks(c) => !matches!(c, looks::Cmd::List),
             // A reload changes this daemon's own files' view, not the mirrored session.
-            Command::Reload(_) | Command::Status(_) | Command::TestHook(_) => false,
+            Command::EosOut(_) | Command::Reload(_) | Command::Status(_) | Command::TestHook(_) => {
+                false
+            }
         }
     }
 

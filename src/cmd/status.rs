@@ -1,11 +1,10 @@
-//! `/vo/ping`, `/vo/status`, subscriptions (`/vo/subscribe`, `/vo/unsubscribe`) and the
-//! export to Eos (`/vo/eos/preset`).
+//! `/vo/ping`, `/vo/status` and subscriptions (`/vo/subscribe`, `/vo/unsubscribe`).
 
 use std::net::SocketAddr;
 
 use rosc::OscMessage;
 
-use super::{Context, int, int_arg, opt_int_arg};
+use super::{Context, int, opt_int_arg};
 use crate::engine::{Outcome, Refusal, msg};
 use crate::osc::args::Request;
 
@@ -14,7 +13,6 @@ pub enum Cmd {
     Status,
     Subscribe(Option<u16>),
     Unsubscribe,
-    EosPreset(u32),
 }
 
 impl Cmd {
@@ -28,8 +26,6 @@ impl Cmd {
             Cmd::Subscribe((port != 0).then_some(port))
         } else if req.matches("/vo/unsubscribe").is_some() {
             Cmd::Unsubscribe
-        } else if req.matches("/vo/eos/preset").is_some() {
-            Cmd::EosPreset(int_arg(req, 0, "preset number", 1, 9999)? as u32)
         } else {
             return Ok(None);
         }))
@@ -68,11 +64,6 @@ impl Cmd {
             Cmd::Unsubscribe => {
                 e.unsubscribe(from);
                 Ok(vec![msg("/vo/unsubscribed", Vec::new())])
-            }
-            Cmd::EosPreset(n) => {
-                // The answer goes to the sender once Eos has the commands.
-                e.eos_preset(n, cx.later())?;
-                Ok(Vec::new())
             }
         }
     }

@@ -1,36 +1,163 @@
-//! `/vo/eos/preset`: the live look recorded on an Eos console as a preset, on a thread of
-//! its own (an Eos console may be slow to connect), through `crate::eos`'s commands.
+//! `/vo/eos/preset`, `/vo/eos/cue`, `/vo/eos/cues`: looks recorded on an Eos console, on a
+//! thread of their own (an Eos console may be slow to connect and to answer), through
+//! `crate::eos`'s commands, each confirmed by Eos's answer (src/eos/record.rs). One
+//! export runs at a time: Eos's answers over UDP come through the OSC port
+//! ([`Engine::eos_heard`]) and go to the export waiting for them.
 
-use rosc::OscType;
+use std::sync::mpsc::{self, Sender};
+use std::sync::{Arc, Mutex};
+
+use rosc::{OscMessage, OscType};
 
 use super::{Engine, Later, Refusal, msg};
+use crate::eos::commands::{Cue, cue_commands, preset_commands};
+use crate::eos::record::{Channel, Record, Target};
+use visobjd_scene::look::{Look, LookFile};
+
+/// What to record.
+pub enum EosRecord {
+    /// The live look as preset `n`.
+    Preset(u32),
+    /// The live look as a cue, labelled (by default with the name of the saved look it
+    /// is, if it is one).
+    Cue { cue: Cue, label: Option<String> },
+    /// Every saved look in number order, one cue each from `first` on, labelled with
+    /// the looks' labels.
+    Cues { first: Cue },
+}
+
+/// Where Eos's answers go while an export waits for them; Some while one runs.
+pub type EosAnswers = Arc<Mutex<Option<Sender<OscMessage>>>>;
 
 impl Engine {
-    /// Pushes the live look to the configured Eos console and records it as preset `n`; the
-    /// answer (`/vo/eos/preset n lights`, or why it could not be sent) goes to `answer`.
-    pub fn eos_preset(&self, n: u32, answer: Later) -> Result<(), Refusal> {
+    /// Records on the configured Eos console; the answer (`/vo/eos/preset n lights`, one
+    /// `/vo/eos/recorded list cue` per cue, or why Eos did not take it) goes to `answer`.
+    pub fn eos_record(&self, what: EosRecord, answer: Later) -> Result<(), Refusal> {
         let config = self.config().eos.clone();
         let to = config.target().map_err(Refusal::conflict)?.ok_or_else(|| {
             Refusal::conflict(
                 "no Eos console is configured: set [eos] address (and protocol) in the config",
             )
         })?;
-        let stage = self.stage();
-        let commands = crate::eos::preset_commands(&stage.scene, &self.session().live, n);
-        let lights = stage.scene.lights.len();
-        self.threads
-            .spawn("eos", move || {
-                answer(match crate::eos::push(&config, to, &commands) {
-                    Ok(()) => Ok(vec![msg(
-                        "/vo/eos/preset",
-                        vec![OscType::Int(n as i32), OscType::Int(lights as i32)],
-                    )]),
-                    Err(e) => {
-                        tracing::warn!("/vo/eos/preset {n}: {e}");
-                        Err(Refusal::internal(e))
+        let records = self.eos_records(what)?;
+        let (tx, heard) = mpsc::channel();
+        {
+            let mut waiting = self.eos_answers.lock().unwrap_or_else(|p| p.into_inner());
+            if waiting.is_some() {
+                return Err(Refusal::conflict(
+                    "an Eos export is running: send this again once it is answered",
+                ));
+            }
+            *waiting = Some(tx);
+        }
+        let waiting = Arc::clone(&self.eos_answers);
+        let started = self.threads.spawn("eos", move || {
+            let result = Channel::open(&config, to, heard).and_then(|mut channel| {
+                let mut replies = Vec::with_capacity(records.len());
+                for (record, reply) in &records {
+                    if let Err(e) = channel.record(&config, record) {
+                        let done = records[..replies.len()]
+                            .iter()
+                            .map(|(r, _)| r.target.name())
+                            .collect::<Vec<_>>();
+                        return Err(if done.is_empty() {
+                            e
+                        } else {
+                            format!("{e} (recorded before it: {})", done.join(", "))
+                        });
                     }
+                    replies.push(reply.clone());
+                }
+                Ok(replies)
+            });
+            *waiting.lock().unwrap_or_else(|p| p.into_inner()) = None;
+            answer(result.map_err(|e| {
+                tracing::warn!("Eos export: {e}");
+                Refusal::internal(e)
+            }));
+        });
+        started.map_err(|e| {
+            *self.eos_answers.lock().unwrap_or_else(|p| p.into_inner()) = None;
+            Refusal::internal(format!("cannot start the Eos export: {e}"))
+        })
+    }
+
+    /// An Eos message that came in on the OSC port (a command line echo or a read-back):
+    /// to the export waiting for it, if one runs.
+    pub fn eos_heard(&self, m: OscMessage) {
+        let waiting = self.eos_answers.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some(tx) = waiting.as_ref() {
+            // The export may have ended meanwhile: nothing to hand it to.
+            let _ = tx.send(m);
+        }
+    }
+
+    /// The records `what` asks for, each with the reply that says it was confirmed.
+    fn eos_records(&self, what: EosRecord) -> Result<Vec<(Record, OscMessage)>, Refusal> {
+        let stage = self.stage();
+        let scene = &stage.scene;
+        let s = self.session();
+        let cue_reply = |cue: Cue| {
+            msg(
+                "/vo/eos/recorded",
+                vec![
+                    OscType::Int(cue.list as i32),
+                    OscType::Float(cue.number as f32),
+                ],
+            )
+        };
+        let cue = |cue: Cue, look: &Look, label: Option<String>| {
+            (
+                Record {
+                    commands: cue_commands(scene, look, cue, s.fade_s, label.as_deref()),
+                    target: Target::Cue(cue, label),
+                },
+                cue_reply(cue),
+            )
+        };
+        Ok(match what {
+            EosRecord::Preset(n) => vec![(
+                Record {
+                    commands: preset_commands(scene, &s.live, n),
+                    target: Target::Preset(n),
+                },
+                msg(
+                    "/vo/eos/preset",
+                    vec![
+                        OscType::Int(n as i32),
+                        OscType::Int(scene.lights.len() as i32),
+                    ],
+                ),
+            )],
+            EosRecord::Cue { cue: c, label } => {
+                let live = LookFile::from_look(scene, &s.live, "");
+                let label = label.or_else(|| {
+                    s.looks
+                        .values()
+                        .find(|f| f.lights == live.lights)
+                        .map(|f| f.label.clone())
                 });
-            })
-            .map_err(|e| Refusal::internal(format!("cannot start the Eos export: {e}")))
+                vec![cue(c, &s.live, label)]
+            }
+            EosRecord::Cues { first } => {
+                if s.looks.is_empty() {
+                    return Err(Refusal::conflict(
+                        "there are no saved looks to record: save some with /vo/look/save first",
+                    ));
+                }
+                let mut records = Vec::with_capacity(s.looks.len());
+                for (i, file) in s.looks.values().enumerate() {
+                    let c = first.after(i).map_err(|e| {
+                        Refusal::input(format!(
+                            "{} saved looks from cue {first}: {e}",
+                            s.looks.len()
+                        ))
+                    })?;
+                    let (look, _) = file.fit(scene);
+                    records.push(cue(c, &look, Some(file.label.clone())));
+                }
+                records
+            }
+        })
     }
 }

@@ -26,6 +26,7 @@ mod backups;
 mod console;
 mod explore;
 mod export;
+pub use export::EosRecord;
 mod generate;
 mod handover;
 mod outcome;
@@ -104,6 +105,8 @@ pub struct Engine {
     pushes: pushes::Pushes,
     backups: backups::Backups,
     console: console::ConsoleInput,
+    /// The Eos export waiting for Eos's answers, if one runs.
+    eos_answers: export::EosAnswers,
     hooks: test_hooks::Hooks,
 }
 
@@ -129,6 +132,7 @@ impl Engine {
             pushes: pushes::Pushes::default(),
             backups: backups::Backups::new(&config),
             console: console::ConsoleInput::new(input),
+            eos_answers: export::EosAnswers::default(),
             hooks: test_hooks::Hooks::from_env(),
             output: Mutex::new(Some(output)),
             session: Mutex::new(session),

@@ -45,6 +45,8 @@ pub struct Request {
     /// The arguments, trailing path numbers first (read through [`Request::arg`] and
     /// [`Request::args`], which count what the command read).
     args: Vec<OscType>,
+    /// How many of `args` came from the path.
+    from_path: usize,
     /// How many arguments the command read: any after them are extra ([`Request::extra`]).
     read: Reads,
 }
@@ -88,12 +90,23 @@ impl Request {
                 Err(_) => OscType::Double(parse_number(s).unwrap_or_default()),
             })
             .collect();
+        let from_path = args.len();
         args.extend(msg.args);
         Request {
             addr: msg.addr,
             segments,
             args,
+            from_path,
             read: Reads::default(),
+        }
+    }
+
+    /// The message as received (its address whole, only the arguments it carried), for
+    /// what is handed on rather than read (Eos's answers to an export).
+    pub fn message(&self) -> OscMessage {
+        OscMessage {
+            addr: self.addr.clone(),
+            args: self.args()[self.from_path..].to_vec(),
         }
     }
 

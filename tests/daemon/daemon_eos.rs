@@ -1,69 +1,17 @@
-//! Export to Eos against a fake console: a TCP (length-prefixed or SLIP) or UDP OSC
-//! listener that records the command lines the daemon sends, checked against the DMX the
-//! daemon puts on the wire (decoded by the tests' own decoder), parameter by parameter.
+//! Export to Eos against a fake console (tests/peers/fake_eos_console.py: a command line
+//! per user, cue lists, presets and cues, reading levels as Eos does) over TCP
+//! (length-prefixed or SLIP) or UDP: the command lines the daemon sends and what the
+//! console stored are checked against the DMX the daemon puts on the wire (decoded by the
+//! tests' own decoder), parameter by parameter; records are confirmed or refused as the
+//! console answers.
 
 use std::collections::BTreeMap;
-use std::io::Read;
-use std::net::{TcpListener, UdpSocket};
+use std::net::TcpListener;
 use std::path::PathBuf;
-use std::time::{Duration, Instant};
 
 use crate::common;
-use crate::common::daemon::{Daemon, Osc, Proto, Setup, float, int, num};
-use rosc::{OscPacket, OscType};
-use visobjd_testkit::{TestLight, temp_dir, write_scene};
-
-/// Command lines (the string arguments) in `packets`, each of which must be addressed to
-/// Eos user `user`'s command line.
-fn command_lines(packets: &[Vec<u8>], user: u32) -> Vec<String> {
-    let addr = format!("/eos/user/{user}/newcmd");
-    packets
-        .iter()
-        .map(|p| match rosc::decoder::decode_udp(p) {
-            Ok((_, OscPacket::Message(m))) => {
-                assert_eq!(m.addr, addr);
-                match m.args.as_slice() {
-                    [OscType::String(s)] => s.clone(),
-                    other => panic!("one string argument expected, got {other:?}"),
-                }
-            }
-            other => panic!("not an OSC message: {other:?}"),
-        })
-        .collect()
-}
-
-/// Splits a length-prefixed (OSC 1.0) stream into packets.
-fn unprefix(mut bytes: &[u8]) -> Vec<Vec<u8>> {
-    let mut out = Vec::new();
-    while bytes.len() >= 4 {
-        let n = u32::from_be_bytes([bytes[0], bytes[1], bytes[2], bytes[3]]) as usize;
-        out.push(bytes[4..4 + n].to_vec());
-        bytes = &bytes[4 + n..];
-    }
-    assert!(bytes.is_empty(), "trailing bytes");
-    out
-}
-
-/// Splits a SLIP (OSC 1.1) stream into packets.
-fn unslip(bytes: &[u8]) -> Vec<Vec<u8>> {
-    let mut out = Vec::new();
-    let mut cur = Vec::new();
-    let mut esc = false;
-    for &b in bytes {
-        match (esc, b) {
-            (false, 0xC0) => {
-                if !cur.is_empty() {
-                    out.push(std::mem::take(&mut cur));
-                }
-            }
-            (false, 0xDB) => esc = true,
-            (true, 0xDC) => (cur.push(0xC0), esc = false).1,
-            (true, 0xDD) => (cur.push(0xDB), esc = false).1,
-            (_, b) => cur.push(b),
-        }
-    }
-    out
-}
+use crate::common::daemon::{Daemon, Osc, PATIENCE, Proto, Setup, float, int, num};
+use visobjd_testkit::{TestLight, temp_dir, tools, write_scene};
 
 /// Each test profile's slots in DMX order as the Eos parameter they should be exported as:
 /// `At16` is a 16-bit pair, `-` a slot left out (uv, fixed).
@@ -139,7 +87,7 @@ fn set_export_look(d: &mut Daemon) {
         (1, 0.6237, [1.0, 0.8, 0.3]),
         (2, 0.5, [0.2, 0.6, 1.0]),
         (3, 0.7, [1.0, 0.9, 0.6]),
-        (4, 0.33, [1.0; 3]),
+        (4, 0.09, [1.0; 3]),
         (5, 0.8, [0.9, 1.0, 0.2]),
         (6, 0.4, [0.5, 0.5, 1.0]),
     ];
@@ -283,57 +231,237 @@ fn assert_every_parameter(lines: &[String], n: u32) {
     );
 }
 
+/// The fake Eos console (`tests/peers/fake_eos_console.py`: a command line per user,
+/// cue lists, presets and cues, answering as Eos does) on a loopback port; killed when
+/// dropped.
+struct FakeConsole {
+    child: std::process::Child,
+    addr: std::net::SocketAddr,
+    state: PathBuf,
+}
+
+impl FakeConsole {
+    /// Starts it with `args` (`--protocol` and the rest); `None` (after
+    /// [`tools::missing`]) without python-osc.
+    fn start(name: &str, args: &[&str]) -> Option<FakeConsole> {
+        use std::io::BufRead;
+        if !tools::python_osc() {
+            return None;
+        }
+        let state = temp_dir(&format!("{name}-console")).join("state.json");
+        let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+        let mut child = std::process::Command::new("python3")
+            .arg(root.join("tests/peers/fake_eos_console.py"))
+            .args(args)
+            .arg("--state")
+            .arg(&state)
+            .stdout(std::process::Stdio::piped())
+            .spawn()
+            .expect("start the fake Eos console");
+        // It prints its port once it listens (a blocking read: it does so at once, or
+        // exits and the read ends).
+        let mut line = String::new();
+        let stdout = child.stdout.take().expect("its stdout");
+        std::io::BufReader::new(stdout)
+            .read_line(&mut line)
+            .expect("read the fake console's port");
+        let port: u16 = line.trim().parse().unwrap_or_else(|_| {
+            let _ = child.kill();
+            panic!("the fake Eos console did not start: `{line}`")
+        });
+        Some(FakeConsole {
+            child,
+            addr: ([127, 0, 0, 1], port).into(),
+            state,
+        })
+    }
+
+    /// What it holds now: each user's command lines, presets and cues.
+    fn state(&self) -> serde_json::Value {
+        let text = std::fs::read_to_string(&self.state).expect("the fake console's state");
+        serde_json::from_str(&text).expect("the fake console's state is JSON")
+    }
+
+    /// The command lines user `user` was sent.
+    fn lines(&self, user: u32) -> Vec<String> {
+        self.state()["lines"][user.to_string()]
+            .as_array()
+            .map(|a| a.iter().map(|l| l.as_str().unwrap().to_string()).collect())
+            .unwrap_or_default()
+    }
+}
+
+impl Drop for FakeConsole {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// A stored preset's or cue's levels as the console read them (a one-digit level is
+/// tens there), as (channel, parameter) -> percent.
+fn stored(levels: &serde_json::Value) -> BTreeMap<(u32, String), f64> {
+    let mut out = BTreeMap::new();
+    for (ch, params) in levels.as_object().expect("levels by channel") {
+        for (p, v) in params.as_object().expect("levels by parameter") {
+            out.insert((ch.parse().unwrap(), p.clone()), v.as_f64().unwrap());
+        }
+    }
+    out
+}
+
+/// Waits until the wire shows what the console stored, parameter for parameter within
+/// one DMX step, and checks it stored no other parameter.
+fn assert_stored_matches_the_wire(d: &Daemon, levels: &serde_json::Value) {
+    let sent = stored(levels);
+    let mut expected = 0;
+    for universe in [1, 2] {
+        let mismatch = |dmx: &[u8]| -> Option<String> {
+            wire_parameters(universe, dmx)
+                .into_iter()
+                .find_map(|(key, want, tol)| match sent.get(&key) {
+                    Some(got) if (got - want).abs() <= tol + 1e-9 => None,
+                    got => Some(format!("{key:?}: the console holds {got:?}, wire {want}")),
+                })
+        };
+        let dmx = d
+            .wire
+            .wait(Proto::Sacn, universe, "the recorded levels", |dmx| {
+                mismatch(dmx).is_none()
+            });
+        assert_eq!(mismatch(&dmx), None);
+        expected += wire_parameters(universe, &dmx).len();
+    }
+    assert_eq!(sent.len(), expected, "extra parameters stored: {levels}");
+}
+
 #[test]
 fn a_preset_reaches_a_tcp_console_as_its_own_user_with_the_wire_levels() {
-    for (protocol, slip, user) in [("tcp", false, Some(7)), ("tcp-slip", true, None)] {
-        let console = TcpListener::bind("127.0.0.1:0").unwrap();
-        let addr = console.local_addr().unwrap();
-        let mut d = export_daemon(&format!("eos-{protocol}"), addr, protocol, user);
+    for (protocol, user) in [("tcp", Some(7)), ("tcp-slip", None)] {
+        let Some(console) = FakeConsole::start(protocol, &["--protocol", protocol]) else {
+            return;
+        };
+        let mut d = export_daemon(&format!("eos-{protocol}"), console.addr, protocol, user);
         let r = d.ok("/vo/eos/preset", vec![int(5)], "/vo/eos/preset");
         assert_eq!((num(&r.args[0]) as i32, num(&r.args[1]) as i32), (5, 6));
-        let (mut stream, _) = console.accept().unwrap();
-        stream
-            .set_read_timeout(Some(Duration::from_secs(5)))
-            .unwrap();
-        let mut bytes = Vec::new();
-        stream.read_to_end(&mut bytes).unwrap();
-        let packets = if slip {
-            unslip(&bytes)
-        } else {
-            unprefix(&bytes)
-        };
-        // The default user is 90.
-        let lines = command_lines(&packets, user.unwrap_or(90));
+        // The default user is 90; nothing went to any other.
+        let user = user.unwrap_or(90);
+        let lines = console.lines(user);
+        assert_eq!(
+            console.state()["lines"].as_object().unwrap().len(),
+            1,
+            "{}",
+            console.state()
+        );
         assert_every_parameter(&lines, 5);
+        assert!(
+            lines.iter().any(|l| l == "Chan 4 At 09 Enter"),
+            "a light at 9 % is written with a leading zero: {lines:?}"
+        );
         assert_lines_match_the_wire(&d, &lines);
+        assert_stored_matches_the_wire(&d, &console.state()["presets"]["5"]["levels"]);
     }
 }
 
 #[test]
-fn a_preset_reaches_a_udp_console_and_an_absent_console_is_an_error() {
-    let console = UdpSocket::bind("127.0.0.1:0").unwrap();
-    let addr = console.local_addr().unwrap();
-    let mut d = export_daemon("eos-udp", addr, "udp", Some(12));
-    d.ok("/vo/eos/preset", vec![int(12)], "/vo/eos/preset");
-    console
-        .set_read_timeout(Some(Duration::from_secs(5)))
-        .unwrap();
-    let mut packets = Vec::new();
-    let end = Instant::now() + Duration::from_secs(5);
-    let mut buf = [0u8; 2048];
-    while Instant::now() < end {
-        let n = console.recv(&mut buf).unwrap();
-        packets.push(buf[..n].to_vec());
-        if command_lines(&packets, 12)
-            .last()
-            .is_some_and(|l| l.contains("Record"))
-        {
-            break;
-        }
+fn a_cue_is_recorded_with_its_time_and_label_and_a_missing_list_is_eoss_error() {
+    let Some(console) = FakeConsole::start("eos-cue", &["--protocol", "tcp", "--lists", "1,2"])
+    else {
+        return;
+    };
+    let mut d = export_daemon("eos-cue", console.addr, "tcp", None);
+    d.ok("/vo/fade", vec![float(2.5)], "/vo/fade");
+    let r = d.ok(
+        "/vo/eos/cue",
+        vec![int(2), float(7.5), common::daemon::string("Act 2 dusk")],
+        "/vo/eos/recorded",
+    );
+    assert_eq!((num(&r.args[0]), num(&r.args[1])), (2.0, 7.5));
+    let cue = &console.state()["cues"]["2/7.5"];
+    assert_eq!(cue["label"], "Act 2 dusk", "{cue}");
+    assert_eq!(cue["time"], 2.5, "{cue}");
+    assert_stored_matches_the_wire(&d, &cue["levels"]);
+    let lines = console.lines(90);
+    assert!(
+        lines.contains(&"Chan 1 Thru 6 Record Cue 2/7.5 Enter".to_string()),
+        "{lines:?}"
+    );
+
+    // A list the console does not have: Eos's own words, and no cue.
+    let why = d.err("/vo/eos/cue", vec![int(9), int(1)]);
+    assert!(why.contains("Cue List Does Not Exist"), "{why}");
+    assert!(why.contains("cue 9/1"), "{why}");
+    assert!(console.state()["cues"].get("9/1").is_none());
+
+    // The live look is a saved look: the cue takes its label.
+    d.ok(
+        "/vo/look/save",
+        vec![int(4), common::daemon::string("Storm")],
+        "/vo/look/saved",
+    );
+    d.ok("/vo/eos/cue", vec![int(1), int(3)], "/vo/eos/recorded");
+    assert_eq!(console.state()["cues"]["1/3"]["label"], "Storm");
+}
+
+#[test]
+fn saved_looks_become_cues_in_a_row_over_udp() {
+    if !tools::python_osc() {
+        return;
     }
-    let lines = command_lines(&packets, 12);
-    assert_every_parameter(&lines, 12);
-    assert_lines_match_the_wire(&d, &lines);
+    // The console answers to the daemon's OSC port (its OSC TX), so the daemon starts
+    // first, pointed at a console port picked now.
+    let console_port =
+        common::daemon::free_port(common::daemon::LOCALHOST, common::daemon::LOCALHOST);
+    let addr: std::net::SocketAddr = ([127, 0, 0, 1], console_port).into();
+    let mut d = export_daemon("eos-udp", addr, "udp", Some(12));
+    let (tx, port) = (d.port.to_string(), console_port.to_string());
+    let Some(console) = FakeConsole::start(
+        "eos-udp",
+        &["--protocol", "udp", "--tx", &tx, "--port", &port],
+    ) else {
+        return;
+    };
+    assert_eq!(console.addr, addr);
+    d.ok(
+        "/vo/look/save",
+        vec![int(1), common::daemon::string("One")],
+        "/vo/look/saved",
+    );
+    d.ok("/vo/light/4/intensity", vec![float(1.0)], "/vo/light");
+    d.ok(
+        "/vo/look/save",
+        vec![int(2), common::daemon::string("Two")],
+        "/vo/look/saved",
+    );
+    // One /vo/eos/recorded per cue, in order.
+    let mut replies = d.call("/vo/eos/cues", vec![int(1), int(10)], "/vo/eos/recorded");
+    replies.extend(d.collect("/vo/eos/recorded", PATIENCE, "the second cue"));
+    let numbers: Vec<f64> = replies.iter().map(|r| num(&r.args[1])).collect();
+    assert_eq!(numbers, [10.0, 11.0]);
+    let cues = &console.state()["cues"];
+    assert_eq!(cues["1/10"]["label"], "One", "{cues}");
+    assert_eq!(cues["1/11"]["label"], "Two", "{cues}");
+    assert_eq!(cues["1/10"]["levels"]["4"]["At"], 9.0, "{cues}");
+    assert_eq!(cues["1/11"]["levels"]["4"]["At"], 100.0, "{cues}");
+}
+
+#[test]
+fn a_console_that_does_not_answer_is_an_error_not_a_success() {
+    let Some(console) = FakeConsole::start("eos-silent", &["--protocol", "tcp", "--silent"]) else {
+        return;
+    };
+    let extra = format!(
+        "\n[eos]\naddress = \"{}\"\nprotocol = \"tcp\"\ntimeout_s = 0.5\n",
+        console.addr
+    );
+    let mut d = Daemon::start_with("eos-silent", &extra);
+    let why = d.err("/vo/eos/preset", vec![int(3)]);
+    assert!(
+        why.contains("did not confirm preset 3 within 0.5 s"),
+        "{why}"
+    );
+    // It was sent, it is just not confirmed.
+    assert!(!console.lines(90).is_empty());
 
     // A console that is not listening: a clear error, nothing changes.
     let closed = TcpListener::bind("127.0.0.1:0")

@@ -11,16 +11,15 @@
 //! console sends (pings, the active channel, the command line, notes, augment3d) is skipped.
 
 use std::collections::BTreeMap;
-use std::io::{Read, Write};
-use std::net::{TcpStream, ToSocketAddrs};
+use std::net::ToSocketAddrs;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
-use rosc::{OscMessage, OscPacket, OscType};
+use rosc::{OscMessage, OscType};
 use visobjd_rig::eos::{self, Arg, EosChannel, EosGroup, EosPatch, Lists, Piece, Reply};
 
-use crate::osc::framing::{self, Decoder, Framing, StreamFrame};
-use crate::osc::packet;
+use crate::eos::link::Link;
+use crate::osc::framing::Framing;
 
 /// Eos's OSC TCP port for OSC 1.0 (length-prefixed) packets.
 const PORT_LENGTH_PREFIX: u16 = 3032;
@@ -68,11 +67,7 @@ pub fn target(source: &str) -> Option<anyhow::Result<(String, Framing)>> {
 /// A connection to the Eos console.
 struct EosConnection<'a> {
     source: &'a str,
-    stream: TcpStream,
-    framing: Framing,
-    decoder: Decoder,
-    /// Messages decoded and not yet taken.
-    queue: std::collections::VecDeque<OscMessage>,
+    link: Link,
     /// The longest the console may be silent.
     quiet: Duration,
     /// When the whole read gives up ([`TOTAL_TIMEOUTS`] times `quiet` from the start).
@@ -81,82 +76,40 @@ struct EosConnection<'a> {
 
 impl EosConnection<'_> {
     fn send(&mut self, addresses: &[String]) -> anyhow::Result<()> {
-        let mut bytes = Vec::new();
-        for a in addresses {
-            let msg = OscPacket::Message(OscMessage {
+        let messages: Vec<OscMessage> = addresses
+            .iter()
+            .map(|a| OscMessage {
                 addr: a.clone(),
                 args: Vec::new(),
-            });
-            let p = rosc::encoder::encode(&msg).with_context(|| format!("cannot encode {a}"))?;
-            bytes.extend(framing::encode(self.framing, &p));
-        }
-        self.stream
-            .write_all(&bytes)
-            .with_context(|| format!("{}: cannot send to Eos", self.source))
+            })
+            .collect();
+        self.link
+            .send(&messages)
+            .map_err(|e| anyhow::anyhow!("{}: {e}", self.source))
     }
 
     /// The next message, waiting at most `quiet` for it, and never past `give_up`; `what`
     /// names what is being read.
     fn next(&mut self, what: &dyn Fn() -> String) -> anyhow::Result<OscMessage> {
         let deadline = Instant::now() + self.quiet;
-        let mut buf = [0u8; 8192];
-        loop {
-            let now = Instant::now();
-            if now >= self.give_up {
-                bail!(
-                    "{}: gave up after {} s ({TOTAL_TIMEOUTS} times --timeout) reading {}: the console answers, but too slowly",
-                    self.source,
-                    (self.quiet * TOTAL_TIMEOUTS).as_secs_f64(),
-                    what()
-                );
-            }
-            if let Some(m) = self.queue.pop_front() {
-                return Ok(m);
-            }
-            if now >= deadline {
-                bail!(
-                    "{}: Eos stopped answering while reading {} (nothing for {} s)",
-                    self.source,
-                    what(),
-                    self.quiet.as_secs_f64()
-                );
-            }
-            let left = deadline.min(self.give_up) - now;
-            self.stream
-                .set_read_timeout(Some(left))
-                .with_context(|| format!("{}: cannot set a read timeout", self.source))?;
-            let n = match self.stream.read(&mut buf) {
-                Ok(0) => bail!(
-                    "{}: Eos closed the connection while reading {}",
-                    self.source,
-                    what()
-                ),
-                Ok(n) => n,
-                Err(e)
-                    if matches!(
-                        e.kind(),
-                        std::io::ErrorKind::WouldBlock
-                            | std::io::ErrorKind::TimedOut
-                            | std::io::ErrorKind::Interrupted
-                    ) =>
-                {
-                    continue;
-                }
-                Err(e) => bail!("{}: reading {}: {e}", self.source, what()),
-            };
-            let mut frames = Vec::new();
-            self.decoder.feed(&buf[..n], &mut frames);
-            for f in frames {
-                match f {
-                    StreamFrame::Packet(p) => match packet::decode(&p) {
-                        Ok(ms) => self.queue.extend(ms),
-                        Err(e) => tracing::debug!("{}: skipped a packet: {e}", self.source),
-                    },
-                    StreamFrame::Oversize { len, .. } => {
-                        tracing::debug!("{}: skipped a {len}-byte frame", self.source)
-                    }
-                }
-            }
+        let m = self
+            .link
+            .next(deadline.min(self.give_up))
+            .map_err(|e| anyhow::anyhow!("{}: {e} while reading {}", self.source, what()))?;
+        match m {
+            Some(m) => Ok(m),
+            None if Instant::now() >= self.give_up => bail!(
+                "{}: gave up after {} s ({TOTAL_TIMEOUTS} times --timeout) reading {}: the console answers, but too slowly",
+                self.source,
+                (self.quiet * TOTAL_TIMEOUTS).as_secs_f64(),
+                what()
+            ),
+            None => bail!(
+                "{}: Eos stopped answering while reading {} (nothing for {} s)",
+                self.source,
+                what(),
+                self.quiet.as_secs_f64()
+            ),
         }
     }
 
@@ -289,17 +242,10 @@ pub fn read(
         .with_context(|| format!("{source}: `{addr}` is not a HOST:PORT"))?
         .next()
         .with_context(|| format!("{source}: the host has no address"))?;
-    let stream = TcpStream::connect_timeout(&to, quiet)
-        .with_context(|| format!("{source}: cannot connect to {to}"))?;
-    stream
-        .set_write_timeout(Some(quiet))
-        .with_context(|| format!("{source}: cannot set a write timeout"))?;
+    let link = Link::connect(to, framing, quiet).map_err(|e| anyhow::anyhow!("{source}: {e}"))?;
     let mut c = EosConnection {
         source,
-        stream,
-        framing,
-        decoder: Decoder::with_framing(framing, framing::MAX_FRAME),
-        queue: Default::default(),
+        link,
         quiet,
         give_up: Instant::now() + quiet * TOTAL_TIMEOUTS,
     };
