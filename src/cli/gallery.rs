@@ -193,12 +193,7 @@ pub fn read_look(path: &Path, stage: &Stage) -> anyhow::Result<visobjd_scene::lo
         .and_then(|(file, n)| Some((Path::new(file), n.parse::<u32>().ok()?)));
     let (path, file) = match saved {
         Some((path, n)) => {
-            let text = std::fs::read_to_string(path)
-                .with_context(|| format!("{}: cannot read", path.display()))?;
-            let saved: crate::engine::persist::LooksFile =
-                serde_json::from_str(&text).map_err(|e| {
-                    anyhow::anyhow!("{}: not the daemon's looks.json: {e}", path.display())
-                })?;
+            let saved = read_saved_looks(path)?;
             let numbers: Vec<String> = saved.looks.keys().map(u32::to_string).collect();
             let Some(file) = saved.looks.get(&n).cloned() else {
                 bail!(
@@ -223,6 +218,14 @@ pub fn read_look(path: &Path, stage: &Stage) -> anyhow::Result<visobjd_scene::lo
     };
     file.to_look(&stage.scene)
         .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
+}
+
+/// The daemon's saved looks in `path` (a state folder's `looks.json`).
+pub fn read_saved_looks(path: &Path) -> anyhow::Result<crate::engine::persist::LooksFile> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("{}: cannot read", path.display()))?;
+    serde_json::from_str(&text)
+        .map_err(|e| anyhow::anyhow!("{}: not the daemon's looks.json: {e}", path.display()))
 }
 
 fn group(stage: &Stage, name: &str) -> anyhow::Result<usize> {

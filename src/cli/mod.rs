@@ -3,6 +3,7 @@
 mod bench;
 mod capture;
 mod check;
+mod export;
 mod gallery;
 mod import;
 mod logs;
@@ -50,6 +51,8 @@ enum Subcommand {
     Capture(capture::Args),
     /// Builds or updates a scene from an MVR plot, or lists a GDTF/OFL fixture type's modes as profiles.
     Import(import::Args),
+    /// Writes the daemon's saved looks as a file a console imports (USITT ASCII).
+    Export(export::Args),
 }
 
 /// Starts rayon's global pool, which renders and generates run on, with its threads named
@@ -129,6 +132,7 @@ pub fn main() -> std::process::ExitCode {
         Subcommand::Bench(args) => bench::run(args),
         Subcommand::Capture(args) => capture::run(args),
         Subcommand::Import(args) => import::run(args),
+        Subcommand::Export(args) => export::run(args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -17,6 +17,7 @@ mod daemon_dmx;
 mod daemon_eos;
 mod daemon_eos_in;
 mod daemon_explore;
+mod daemon_export;
 mod daemon_faults;
 mod daemon_gallery;
 mod daemon_hostile;
