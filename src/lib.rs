@@ -15,6 +15,7 @@ pub mod config;
 pub mod engine;
 pub mod eos;
 pub mod http;
+pub mod ma3;
 pub mod osc;
 pub mod shutdown;
 pub mod touchosc;

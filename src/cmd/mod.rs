@@ -21,6 +21,7 @@ mod gallery;
 mod generate;
 mod live;
 mod looks;
+mod ma3;
 mod objective;
 mod reload;
 mod runner;
@@ -56,6 +57,7 @@ enum Command {
     Gallery(gallery::Cmd),
     Live(live::Cmd),
     Looks(looks::Cmd),
+    Ma3(ma3::Cmd),
     Reload(reload::Cmd),
     Status(status::Cmd),
     TestHook(test_hook::Cmd),
@@ -105,6 +107,9 @@ impl Command {
         if let Some(c) = looks::Cmd::parse(req)? {
             return Ok(Command::Looks(c));
         }
+        if let Some(c) = ma3::Cmd::parse(req)? {
+            return Ok(Command::Ma3(c));
+        }
         if let Some(c) = reload::Cmd::parse(req)? {
             return Ok(Command::Reload(c));
         }
@@ -139,6 +144,7 @@ impl Command {
             Command::Gallery(_) => "gallery",
             Command::Live(_) => "live",
             Command::Looks(_) => "looks",
+            Command::Ma3(_) => "ma3",
             Command::Reload(_) => "reload",
             Command::Status(_) => "status",
             Command::TestHook(_) => "test",
@@ -158,6 +164,7 @@ impl Command {
             Command::Gallery(c) => c.apply(cx),
             Command::Live(c) => c.apply(cx),
             Command::Looks(c) => c.apply(cx),
+            Command::Ma3(c) => c.apply(cx),
             Command::Reload(c) => c.apply(cx),
             Command::Status(c) => c.apply(cx),
             Command::TestHook(c) => c.apply(cx),
@@ -187,9 +194,11 @@ impl Command {
             Command::Live(c) => !matches!(c, live::Cmd::Live),
             Command::Looks(c) => !matches!(c, looks::Cmd::List),
             // A reload changes this daemon's own files' view, not the mirrored session.
-            Command::EosOut(_) | Command::Reload(_) | Command::Status(_) | Command::TestHook(_) => {
-                false
-            }
+            Command::EosOut(_)
+            | Command::Ma3(_)
+            | Command::Reload(_)
+            | Command::Status(_)
+            | Command::TestHook(_) => false,
         }
     }
 

@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use serde::Deserialize;
 
 use crate::eos::EosConfig;
+use crate::ma3::Ma3Config;
 use visobjd_dmx::{InputConfig, OutputConfig};
 use visobjd_scene::describe_toml_error;
 
@@ -37,6 +38,8 @@ pub struct Config {
     pub generate: GenerateConfig,
     /// The Eos console presets are exported to (none by default).
     pub eos: EosConfig,
+    /// The grandMA3 desk looks are stored on (none by default).
+    pub ma3: Ma3Config,
     /// The web gallery (off by default).
     pub http: HttpConfig,
     /// `visobjd capture`'s settings.
@@ -56,6 +59,7 @@ struct ConfigFile {
     input: InputConfig,
     generate: GenerateConfig,
     eos: EosConfig,
+    ma3: Ma3Config,
     http: HttpConfig,
     capture: CaptureConfig,
     backup: Option<BackupConfig>,
@@ -72,6 +76,7 @@ impl Default for ConfigFile {
             input: InputConfig::default(),
             generate: GenerateConfig::default(),
             eos: EosConfig::default(),
+            ma3: Ma3Config::default(),
             http: HttpConfig::default(),
             capture: CaptureConfig::default(),
             backup: None,
@@ -316,6 +321,7 @@ impl Config {
             return Err(at((*m).to_string()));
         }
         file.eos.validate().map_err(at)?;
+        file.ma3.validate().map_err(at)?;
         if let Some(sacn) = &file.input.sacn {
             sacn.addresses().map_err(at)?;
         }
@@ -355,6 +361,7 @@ impl Config {
             input: file.input,
             generate: file.generate,
             eos: file.eos,
+            ma3: file.ma3,
             http,
             capture: file.capture,
             backup: file.backup,

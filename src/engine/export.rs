@@ -1,9 +1,11 @@
-//! `/vo/eos/preset`, `/vo/eos/cue`, `/vo/eos/cues`: looks recorded on an Eos console, on a
-//! thread of their own (an Eos console may be slow to connect and to answer), through
+//! Looks recorded into consoles. `/vo/ma3/preset`, `/vo/ma3/cue`: the live look stored on
+//! a grandMA3 (sent, never confirmed: MA3 answers nothing over OSC). `/vo/eos/preset`,
+//! `/vo/eos/cue`, `/vo/eos/cues`: looks recorded on an Eos console, on a thread of their own (an Eos console may be slow to connect and to answer), through
 //! `crate::eos`'s commands, each confirmed by Eos's answer (src/eos/record.rs). One
 //! export runs at a time: Eos's answers over UDP come through the OSC port
 //! ([`Engine::eos_heard`]) and go to the export waiting for them.
 
+use std::collections::BTreeMap;
 use std::sync::mpsc::{self, Sender};
 use std::sync::{Arc, Mutex};
 
@@ -12,6 +14,8 @@ use rosc::{OscMessage, OscType};
 use super::{Engine, Later, Refusal, msg};
 use crate::eos::commands::{Cue, cue_commands, preset_commands};
 use crate::eos::record::{Channel, Record, Target};
+use crate::ma3::commands::{Target as Ma3Target, store_commands};
+use visobjd_scene::Scene;
 use visobjd_scene::look::{Look, LookFile};
 
 /// What to record.
@@ -82,6 +86,37 @@ impl Engine {
         })
     }
 
+    /// Stores the live look on the configured grandMA3 as `target` (a cue with the
+    /// session's fade), labelled (by default as the saved look it is, if any); answers
+    /// `/vo/ma3/sent what:s commands:i` once sent.
+    pub fn ma3_store(
+        &self,
+        target: Ma3Target,
+        label: Option<String>,
+    ) -> Result<OscMessage, Refusal> {
+        let config = self.config().ma3.clone();
+        let to = config.target().map_err(Refusal::conflict)?.ok_or_else(|| {
+            Refusal::conflict("no grandMA3 is configured: set [ma3] address in the config")
+        })?;
+        let stage = self.stage();
+        let commands = {
+            let s = self.session();
+            let label = label.or_else(|| saved_label(&stage.scene, &s.looks, &s.live));
+            store_commands(&stage.scene, &s.live, target, label.as_deref(), s.fade_s)
+        };
+        crate::ma3::send(&config, to, &commands).map_err(|e| {
+            tracing::warn!("grandMA3 export: {e}");
+            Refusal::internal(e)
+        })?;
+        Ok(msg(
+            "/vo/ma3/sent",
+            vec![
+                OscType::String(target.to_string()),
+                OscType::Int(commands.len() as i32),
+            ],
+        ))
+    }
+
     /// An Eos message that came in on the OSC port (a command line echo or a read-back):
     /// to the export waiting for it, if one runs.
     pub fn eos_heard(&self, m: OscMessage) {
@@ -130,13 +165,7 @@ impl Engine {
                 ),
             )],
             EosRecord::Cue { cue: c, label } => {
-                let live = LookFile::from_look(scene, &s.live, "");
-                let label = label.or_else(|| {
-                    s.looks
-                        .values()
-                        .find(|f| f.lights == live.lights)
-                        .map(|f| f.label.clone())
-                });
+                let label = label.or_else(|| saved_label(scene, &s.looks, &s.live));
                 vec![cue(c, &s.live, label)]
             }
             EosRecord::Cues { first } => {
@@ -160,4 +189,13 @@ impl Engine {
             }
         })
     }
+}
+
+/// The label of the saved look `live` is, if it is one.
+fn saved_label(scene: &Scene, looks: &BTreeMap<u32, LookFile>, live: &Look) -> Option<String> {
+    let live = LookFile::from_look(scene, live, "");
+    looks
+        .values()
+        .find(|f| f.lights == live.lights)
+        .map(|f| f.label.clone())
 }

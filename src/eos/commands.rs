@@ -169,8 +169,8 @@ pub fn label_text(label: &str) -> String {
     one_line.split_whitespace().collect::<Vec<_>>().join(" ")
 }
 
-/// `v` with at most `decimals` decimals and no trailing zeros.
-fn trimmed(v: f64, decimals: usize) -> String {
+/// `v` with at most `decimals` decimals and no trailing zeros (`62.5`, `3`).
+pub fn trimmed(v: f64, decimals: usize) -> String {
     let p = format!("{v:.decimals$}");
     if p.contains('.') {
         p.trim_end_matches('0').trim_end_matches('.').to_string()

@@ -129,7 +129,7 @@ fn parameters(lines: &[String]) -> BTreeMap<(u32, String), f64> {
 
 /// What the wire's slots `dmx` of universe `universe` say each exported parameter must
 /// be, with the tolerance of one DMX step; a light without a dimmer is `At 100`.
-fn wire_parameters(universe: u16, dmx: &[u8]) -> Vec<((u32, String), f64, f64)> {
+pub fn wire_parameters(universe: u16, dmx: &[u8]) -> Vec<((u32, String), f64, f64)> {
     let mut out = Vec::new();
     for &(ch, profile, u, address) in STAGE.iter().filter(|s| s.2 == universe) {
         assert_eq!(u, universe);
@@ -188,15 +188,20 @@ fn export_daemon(
     protocol: &str,
     user: Option<u32>,
 ) -> Daemon {
-    let dir = temp_dir(&format!("{name}-scene"));
     let mut extra = format!("\n[eos]\naddress = \"{console}\"\nprotocol = \"{protocol}\"\n");
     if let Some(u) = user {
         extra += &format!("user = {u}\n");
     }
+    export_daemon_with(name, &extra)
+}
+
+/// The export stage with `extra` config, its look set ([`set_export_look`]).
+pub fn export_daemon_with(name: &str, extra: &str) -> Daemon {
+    let dir = temp_dir(&format!("{name}-scene"));
     let mut d = Daemon::start_setup(
         name,
         Setup {
-            extra,
+            extra: extra.to_string(),
             scene_from: Some(export_scene(&dir)),
             ..Setup::default()
         },

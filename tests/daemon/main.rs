@@ -23,6 +23,7 @@ mod daemon_gallery;
 mod daemon_hostile;
 mod daemon_live;
 mod daemon_looks;
+mod daemon_ma3;
 mod daemon_objectives;
 mod daemon_peers;
 mod daemon_reload;

@@ -50,3 +50,16 @@ pub fn fake_gphoto2() -> bool {
         "python3 -m pip install pillow piexif numpy pidng",
     )
 }
+
+/// Whether a stock Lua interpreter (`lua`) runs: the grandMA3 plugin test runs the
+/// exported plugin's Lua under it with a stub of MA3's `Cmd`.
+pub fn lua() -> bool {
+    let ready = Command::new("lua")
+        .args(["-e", "assert(load)"])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !ready {
+        missing("lua", "is not installed", "apt-get install lua5.4");
+    }
+    ready
+}

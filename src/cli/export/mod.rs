@@ -1,6 +1,8 @@
-//! `visobjd export`: the daemon's saved looks written as a file a console imports, for a
-//! console without a network link to visobjd (docs/export.md).
+//! `visobjd export`: the daemon's saved looks written as files a console imports, for a
+//! console without a network link to visobjd: USITT ASCII (docs/export.md), a grandMA3
+//! plugin (docs/ma3.md).
 
+mod ma3;
 mod usitt;
 
 use std::path::Path;
@@ -22,12 +24,16 @@ enum Format {
     /// USITT ASCII (Ident 3:0): every saved look as a cue of channel levels, which Eos,
     /// Ion, Element, Strand and many other consoles import.
     Ascii(usitt::Args),
+    /// A grandMA3 plugin (XML and Lua) that stores every saved look as a preset or a cue
+    /// when run on the desk.
+    Ma3(ma3::Args),
 }
 
 /// Runs `export`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     match args.format {
         Format::Ascii(a) => usitt::run(a),
+        Format::Ma3(a) => ma3::run(a),
     }
 }
 
