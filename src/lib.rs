@@ -12,6 +12,7 @@ pub mod backup;
 pub mod cli;
 pub mod cmd;
 pub mod config;
+pub mod desk;
 pub mod engine;
 pub mod eos;
 pub mod http;

@@ -83,15 +83,7 @@ impl EosConfig {
 
     /// The Eos console's address, None when export is off; Err names the bad value.
     pub fn target(&self) -> Result<Option<SocketAddr>, String> {
-        if self.address.trim().is_empty() {
-            return Ok(None);
-        }
-        self.address.trim().parse().map(Some).map_err(|_| {
-            format!(
-                "eos.address `{}` is not an address:port such as 10.101.0.5:8000",
-                self.address
-            )
-        })
+        crate::desk::address("eos.address", &self.address, "10.101.0.5:8000")
     }
 
     /// The OSC address every command line is sent to.

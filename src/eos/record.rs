@@ -114,13 +114,7 @@ impl Channel {
     ) -> Result<Channel, String> {
         let framing = match config.protocol {
             Protocol::Udp => {
-                let local: SocketAddr = if to.is_ipv4() {
-                    (std::net::Ipv4Addr::UNSPECIFIED, 0).into()
-                } else {
-                    (std::net::Ipv6Addr::UNSPECIFIED, 0).into()
-                };
-                let socket = UdpSocket::bind(local)
-                    .map_err(|e| format!("cannot open a socket for Eos at {to}: {e}"))?;
+                let socket = crate::desk::udp_socket(to)?;
                 return Ok(Channel::Udp { socket, to, heard });
             }
             Protocol::Tcp => Framing::LengthPrefix,

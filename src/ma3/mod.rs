@@ -5,7 +5,7 @@
 
 pub mod commands;
 
-use std::net::{SocketAddr, UdpSocket};
+use std::net::SocketAddr;
 
 use rosc::{OscMessage, OscPacket, OscType};
 use serde::Deserialize;
@@ -49,15 +49,7 @@ impl Ma3Config {
 
     /// The desk's address, None when the export is off; Err names the bad value.
     pub fn target(&self) -> Result<Option<SocketAddr>, String> {
-        if self.address.trim().is_empty() {
-            return Ok(None);
-        }
-        self.address.trim().parse().map(Some).map_err(|_| {
-            format!(
-                "ma3.address `{}` is not an address:port such as 10.101.0.8:8000",
-                self.address
-            )
-        })
+        crate::desk::address("ma3.address", &self.address, "10.101.0.8:8000")
     }
 
     /// The OSC address every command goes to.
@@ -69,13 +61,7 @@ impl Ma3Config {
 /// Sends the commands to the desk over UDP, one message each, in order.
 pub fn send(config: &Ma3Config, to: SocketAddr, commands: &[String]) -> Result<(), String> {
     let addr = config.command_address();
-    let local: SocketAddr = if to.is_ipv4() {
-        (std::net::Ipv4Addr::UNSPECIFIED, 0).into()
-    } else {
-        (std::net::Ipv6Addr::UNSPECIFIED, 0).into()
-    };
-    let socket = UdpSocket::bind(local)
-        .map_err(|e| format!("cannot open a socket for grandMA3 at {to}: {e}"))?;
+    let socket = crate::desk::udp_socket(to)?;
     for c in commands {
         let packet = rosc::encoder::encode(&OscPacket::Message(OscMessage {
             addr: addr.clone(),

@@ -732,30 +732,17 @@ impl FakeEos {
 
     /// Starts it serving the patch of the export `csv`.
     fn serve(csv: &Path, args: &[&str]) -> Option<FakeEos> {
-        use std::io::BufRead;
         if !tools::python_osc() {
             return None;
         }
         let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
-        let mut child = Command::new("python3")
+        let mut command = Command::new("python3");
+        command
             .arg(root.join("tests/peers/fake_eos.py"))
             .arg("--csv")
             .arg(csv)
-            .args(args)
-            .stdout(std::process::Stdio::piped())
-            .spawn()
-            .expect("start the fake Eos console");
-        // It prints its port once it listens (a blocking read: it does so at once, or
-        // exits and the read ends).
-        let mut line = String::new();
-        let stdout = child.stdout.take().expect("its stdout");
-        std::io::BufReader::new(stdout)
-            .read_line(&mut line)
-            .expect("read the fake console's port");
-        let port = line.trim().parse().unwrap_or_else(|_| {
-            let _ = child.kill();
-            panic!("the fake Eos console did not start: `{line}`")
-        });
+            .args(args);
+        let (child, port) = crate::common::start_peer(command, "the fake Eos console");
         Some(FakeEos { child, port })
     }
 

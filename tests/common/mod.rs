@@ -28,3 +28,26 @@ pub fn size(knob: &str, short: u64, full: u64) -> u64 {
         short
     }
 }
+
+/// Starts `command`, an independent peer (a fake console) that prints the port it listens
+/// on as its first line once it listens, and returns it with that port. `what` names it.
+pub fn start_peer(mut command: std::process::Command, what: &str) -> (std::process::Child, u16) {
+    use std::io::BufRead;
+    let mut child = command
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap_or_else(|e| panic!("start {what}: {e}"));
+    // A blocking read: it prints at once, or exits and the read ends.
+    let mut line = String::new();
+    let stdout = child.stdout.take().expect("its stdout");
+    std::io::BufReader::new(stdout)
+        .read_line(&mut line)
+        .unwrap_or_else(|e| panic!("read {what}'s port: {e}"));
+    match line.trim().parse() {
+        Ok(port) => (child, port),
+        Err(_) => {
+            let _ = child.kill();
+            panic!("{what} did not start: `{line}`")
+        }
+    }
+}

@@ -159,26 +159,35 @@ pub fn wire_parameters(universe: u16, dmx: &[u8]) -> Vec<((u32, String), f64, f6
 /// Waits until the wire shows what the command lines say, parameter for parameter within
 /// one DMX step, and checks the lines hold no other parameter.
 fn assert_lines_match_the_wire(d: &Daemon, lines: &[String]) {
-    let sent = parameters(lines);
+    assert_matches_the_wire(d, &parameters(lines), wire_parameters, "exported");
+}
+
+/// Waits until the wire shows `held` (`(channel, parameter)` -> percent), parameter for
+/// parameter within one DMX step as `wire` reads a universe's slots (the parameters it
+/// must hold, the level and the tolerance), and checks `held` has no other; `who` holds it.
+pub fn assert_matches_the_wire(
+    d: &Daemon,
+    held: &BTreeMap<(u32, String), f64>,
+    wire: impl Fn(u16, &[u8]) -> Vec<((u32, String), f64, f64)>,
+    who: &str,
+) {
     let mut expected = 0;
     for universe in [1, 2] {
         let mismatch = |dmx: &[u8]| -> Option<String> {
-            wire_parameters(universe, dmx)
+            wire(universe, dmx)
                 .into_iter()
-                .find_map(|(key, want, tol)| match sent.get(&key) {
+                .find_map(|(key, want, tol)| match held.get(&key) {
                     Some(got) if (got - want).abs() <= tol + 1e-9 => None,
-                    got => Some(format!("{key:?}: exported {got:?}, wire {want}")),
+                    got => Some(format!("{key:?}: {who} {got:?}, wire {want}")),
                 })
         };
-        let dmx = d
-            .wire
-            .wait(Proto::Sacn, universe, "the exported levels", |dmx| {
-                mismatch(dmx).is_none()
-            });
+        let dmx = d.wire.wait(Proto::Sacn, universe, "the levels", |dmx| {
+            mismatch(dmx).is_none()
+        });
         assert_eq!(mismatch(&dmx), None);
-        expected += wire_parameters(universe, &dmx).len();
+        expected += wire(universe, &dmx).len();
     }
-    assert_eq!(sent.len(), expected, "extra parameters exported: {lines:?}");
+    assert_eq!(held.len(), expected, "extra parameters {who}: {held:?}");
 }
 
 /// The export stage with `[eos]` pointing at `console`.
@@ -249,31 +258,18 @@ impl FakeConsole {
     /// Starts it with `args` (`--protocol` and the rest); `None` (after
     /// [`tools::missing`]) without python-osc.
     fn start(name: &str, args: &[&str]) -> Option<FakeConsole> {
-        use std::io::BufRead;
         if !tools::python_osc() {
             return None;
         }
         let state = temp_dir(&format!("{name}-console")).join("state.json");
         let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
-        let mut child = std::process::Command::new("python3")
+        let mut command = std::process::Command::new("python3");
+        command
             .arg(root.join("tests/peers/fake_eos_console.py"))
             .args(args)
             .arg("--state")
-            .arg(&state)
-            .stdout(std::process::Stdio::piped())
-            .spawn()
-            .expect("start the fake Eos console");
-        // It prints its port once it listens (a blocking read: it does so at once, or
-        // exits and the read ends).
-        let mut line = String::new();
-        let stdout = child.stdout.take().expect("its stdout");
-        std::io::BufReader::new(stdout)
-            .read_line(&mut line)
-            .expect("read the fake console's port");
-        let port: u16 = line.trim().parse().unwrap_or_else(|_| {
-            let _ = child.kill();
-            panic!("the fake Eos console did not start: `{line}`")
-        });
+            .arg(&state);
+        let (child, port) = common::start_peer(command, "the fake Eos console");
         Some(FakeConsole {
             child,
             addr: ([127, 0, 0, 1], port).into(),
@@ -318,26 +314,7 @@ fn stored(levels: &serde_json::Value) -> BTreeMap<(u32, String), f64> {
 /// Waits until the wire shows what the console stored, parameter for parameter within
 /// one DMX step, and checks it stored no other parameter.
 fn assert_stored_matches_the_wire(d: &Daemon, levels: &serde_json::Value) {
-    let sent = stored(levels);
-    let mut expected = 0;
-    for universe in [1, 2] {
-        let mismatch = |dmx: &[u8]| -> Option<String> {
-            wire_parameters(universe, dmx)
-                .into_iter()
-                .find_map(|(key, want, tol)| match sent.get(&key) {
-                    Some(got) if (got - want).abs() <= tol + 1e-9 => None,
-                    got => Some(format!("{key:?}: the console holds {got:?}, wire {want}")),
-                })
-        };
-        let dmx = d
-            .wire
-            .wait(Proto::Sacn, universe, "the recorded levels", |dmx| {
-                mismatch(dmx).is_none()
-            });
-        assert_eq!(mismatch(&dmx), None);
-        expected += wire_parameters(universe, &dmx).len();
-    }
-    assert_eq!(sent.len(), expected, "extra parameters stored: {levels}");
+    assert_matches_the_wire(d, &stored(levels), wire_parameters, "stored");
 }
 
 #[test]

@@ -10,8 +10,8 @@ use std::process::Command;
 use std::time::Instant;
 
 use crate::common::bin;
-use crate::common::daemon::{Daemon, Osc, PATIENCE, Proto, float, int, num, string, text};
-use crate::daemon_eos::{export_daemon_with, wire_parameters};
+use crate::common::daemon::{Daemon, Osc, PATIENCE, float, int, num, string, text};
+use crate::daemon_eos::{assert_matches_the_wire, export_daemon_with, wire_parameters};
 use visobjd_testkit::{temp_dir, tools};
 
 fn peer() -> PathBuf {
@@ -28,27 +28,13 @@ struct FakeMa3 {
 impl FakeMa3 {
     /// Starts it; `None` (after [`tools::missing`]) without python-osc.
     fn start(name: &str) -> Option<FakeMa3> {
-        use std::io::BufRead;
         if !tools::python_osc() {
             return None;
         }
         let state = temp_dir(&format!("{name}-desk")).join("state.json");
-        let mut child = Command::new("python3")
-            .arg(peer())
-            .arg("--state")
-            .arg(&state)
-            .stdout(std::process::Stdio::piped())
-            .spawn()
-            .expect("start the fake grandMA3");
-        let mut line = String::new();
-        let stdout = child.stdout.take().expect("its stdout");
-        std::io::BufReader::new(stdout)
-            .read_line(&mut line)
-            .expect("read the fake desk's port");
-        let port = line.trim().parse().unwrap_or_else(|_| {
-            let _ = child.kill();
-            panic!("the fake grandMA3 did not start: `{line}`")
-        });
+        let mut command = Command::new("python3");
+        command.arg(peer()).arg("--state").arg(&state);
+        let (child, port) = crate::common::start_peer(command, "the fake grandMA3");
         Some(FakeMa3 { child, port, state })
     }
 
@@ -111,33 +97,16 @@ fn assert_stored_matches_the_wire(d: &Daemon, values: &serde_json::Value) {
                 .map(move |(a, v)| ((f.parse().unwrap(), a.clone()), v.as_f64().unwrap()))
         })
         .collect();
-    let mut expected = 0;
-    for universe in [1, 2] {
-        // A light without a dimmer has no Dimmer on MA3 (its emitters carry it).
-        let wanted = |dmx: &[u8]| {
-            wire_parameters(universe, dmx)
-                .into_iter()
-                .filter(|((_, p), _, tol)| !(p == "At" && *tol == 0.0))
-                .map(|((ch, p), want, tol)| ((ch, ma3_name(&p).to_string()), want, tol))
-                .collect::<Vec<_>>()
-        };
-        let mismatch = |dmx: &[u8]| {
-            wanted(dmx)
-                .into_iter()
-                .find_map(|(key, want, tol)| match stored.get(&key) {
-                    Some(got) if (got - want).abs() <= tol + 1e-9 => None,
-                    got => Some(format!("{key:?}: the desk holds {got:?}, wire {want}")),
-                })
-        };
-        let dmx = d
-            .wire
-            .wait(Proto::Sacn, universe, "the stored values", |dmx| {
-                mismatch(dmx).is_none()
-            });
-        assert_eq!(mismatch(&dmx), None);
-        expected += wanted(&dmx).len();
-    }
-    assert_eq!(stored.len(), expected, "extra attributes stored: {values}");
+    // Eos's parameters in MA3's names; a light without a dimmer has no Dimmer on MA3 (its
+    // emitters carry it).
+    let wire = |universe, dmx: &[u8]| {
+        wire_parameters(universe, dmx)
+            .into_iter()
+            .filter(|((_, p), _, tol)| !(p == "At" && *tol == 0.0))
+            .map(|((ch, p), want, tol)| ((ch, ma3_name(&p).to_string()), want, tol))
+            .collect()
+    };
+    assert_matches_the_wire(d, &stored, wire, "the desk holds");
 }
 
 fn ma3_daemon(name: &str, desk: &FakeMa3) -> Daemon {

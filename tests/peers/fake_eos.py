@@ -18,7 +18,7 @@ between, as a console with OSC TX on sends them all the time.
 The patch comes from an Eos CSV export read with Python's own csv module (the rows of one
 channel are its parts, in order; U/A and U/A<E addresses become absolute ones), so the
 console serves the same patch the CSV holds. Messages are built with python-osc; the TCP
-framing (OSC 1.0 length prefix, or SLIP with --slip) is written here.
+framing (OSC 1.0 length prefix, or SLIP with --slip) is osc_stream.py's.
 
 Usage: fake_eos.py --csv FILE [--group LABEL=1-2,11 ...] [--slip] [--hang-after N]
                    [--groups-reported N] [--delay S]
@@ -32,21 +32,12 @@ stays silent (the connection open) until the client goes away.
 import argparse
 import csv
 import socket
-import struct
 import sys
 import time
 
-from pythonosc.osc_message_builder import OscMessageBuilder
 from pythonosc.osc_message import OscMessage
 
-END, ESC, ESC_END, ESC_ESC = 0xC0, 0xDB, 0xDC, 0xDD
-
-
-def message(address, args):
-    b = OscMessageBuilder(address=address)
-    for a in args:
-        b.add_arg(a, "i" if isinstance(a, int) else "s")
-    return b.build().dgram
+from osc_stream import build, framed, frames
 
 
 def absolute(text):
@@ -105,15 +96,7 @@ class Link:
         self.slip = slip
 
     def send(self, address, args):
-        d = message(address, args)
-        if self.slip:
-            body = bytearray([END])
-            for b in d:
-                body += {END: bytes([ESC, ESC_END]), ESC: bytes([ESC, ESC_ESC])}.get(b, bytes([b]))
-            body.append(END)
-            self.conn.sendall(bytes(body))
-        else:
-            self.conn.sendall(struct.pack(">I", len(d)) + d)
+        self.conn.sendall(framed(build(address, args), self.slip))
 
     def noise(self):
         self.send("/eos/out/ping", [])
@@ -129,25 +112,8 @@ class Link:
 
 def requests(conn, slip):
     """OSC addresses the client sends, one at a time."""
-    buf = b""
-    while True:
-        data = conn.recv(4096)
-        if not data:
-            return
-        buf += data
-        if slip:
-            while bytes([END]) in buf:
-                frame, buf = buf.split(bytes([END]), 1)
-                frame = frame.replace(bytes([ESC, ESC_END]), bytes([END])).replace(bytes([ESC, ESC_ESC]), bytes([ESC]))
-                if frame:
-                    yield OscMessage(frame).address
-        else:
-            while len(buf) >= 4:
-                n = struct.unpack(">I", buf[:4])[0]
-                if len(buf) < 4 + n:
-                    break
-                frame, buf = buf[4:4 + n], buf[4 + n:]
-                yield OscMessage(frame).address
+    for frame in frames(conn, slip):
+        yield OscMessage(frame).address
 
 
 def main():

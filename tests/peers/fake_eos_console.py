@@ -25,7 +25,7 @@ Commands run (channel selections with Thru and +):
 Anything else is refused ("Error: Syntax Error").
 
 Messages are parsed and built with python-osc; the TCP framing (OSC 1.0 length prefix,
-or SLIP with --protocol tcp-slip) is written here. Over UDP (--protocol udp) the answers
+or SLIP with --protocol tcp-slip) is osc_stream.py's. Over UDP (--protocol udp) the answers
 go to 127.0.0.1:--tx, as Eos sends to its OSC TX address, not back to the sender.
 
 Usage: fake_eos_console.py --protocol tcp|tcp-slip|udp [--tx PORT] [--port PORT]
@@ -40,21 +40,12 @@ import json
 import os
 import re
 import socket
-import struct
 import sys
 import threading
 
 from pythonosc.osc_message import OscMessage
-from pythonosc.osc_message_builder import OscMessageBuilder
 
-END, ESC, ESC_END, ESC_ESC = 0xC0, 0xDB, 0xDC, 0xDD
-
-
-def build(address, args):
-    b = OscMessageBuilder(address=address)
-    for a in args:
-        b.add_arg(a, "i" if isinstance(a, int) else "s")
-    return b.build().dgram
+from osc_stream import build, framed, frames, selection
 
 
 def level(text):
@@ -64,23 +55,6 @@ def level(text):
     if re.fullmatch(r"[0-9]", text):
         return float(text) * 10.0
     return float(text)
-
-
-def channels(words):
-    """The channels of a selection such as 1 Thru 4 + 7."""
-    out, i = [], 0
-    while i < len(words):
-        if words[i] == "+":
-            i += 1
-            continue
-        start = int(words[i])
-        if i + 2 < len(words) and words[i + 1] == "Thru":
-            out.extend(range(start, int(words[i + 2]) + 1))
-            i += 3
-        else:
-            out.append(start)
-            i += 1
-    return out
 
 
 def cue_key(text):
@@ -108,7 +82,7 @@ class Console:
                     break
             else:
                 return "Syntax Error"
-            sel, tail = channels(rest[:i]), rest[i:]
+            sel, tail = selection(rest[:i]), rest[i:]
             if tail[0] == "Record" and len(tail) == 3 and tail[1] == "Preset":
                 self.presets[tail[2]] = {
                     "label": "", "levels": {str(c): dict(self.live.get(c, {})) for c in sel}}
@@ -174,40 +148,6 @@ class Console:
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, self.state_path)
-
-
-def frames(conn, slip):
-    """The OSC packets a TCP client sends, one at a time."""
-    buf = b""
-    while True:
-        data = conn.recv(65536)
-        if not data:
-            return
-        buf += data
-        if slip:
-            while bytes([END]) in buf:
-                frame, buf = buf.split(bytes([END]), 1)
-                frame = frame.replace(bytes([ESC, ESC_END]), bytes([END])).replace(
-                    bytes([ESC, ESC_ESC]), bytes([ESC]))
-                if frame:
-                    yield frame
-        else:
-            while len(buf) >= 4:
-                n = struct.unpack(">I", buf[:4])[0]
-                if len(buf) < 4 + n:
-                    break
-                frame, buf = buf[4:4 + n], buf[4 + n:]
-                yield frame
-
-
-def framed(dgram, slip):
-    if not slip:
-        return struct.pack(">I", len(dgram)) + dgram
-    body = bytearray([END])
-    for b in dgram:
-        body += {END: bytes([ESC, ESC_END]), ESC: bytes([ESC, ESC_ESC])}.get(b, bytes([b]))
-    body.append(END)
-    return bytes(body)
 
 
 def main():

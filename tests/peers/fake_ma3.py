@@ -32,21 +32,7 @@ import sys
 
 from pythonosc.osc_message import OscMessage
 
-
-def fixtures(words):
-    out, i = [], 0
-    while i < len(words):
-        if words[i] == "+":
-            i += 1
-            continue
-        start = int(words[i])
-        if i + 2 < len(words) and words[i + 1] == "Thru":
-            out.extend(range(start, int(words[i + 2]) + 1))
-            i += 3
-        else:
-            out.append(start)
-            i += 1
-    return out
+from osc_stream import selection
 
 
 class Desk:
@@ -77,13 +63,13 @@ class Desk:
                 i = w.index("Attribute")
                 if len(w) != i + 4 or w[i + 2] != "At":
                     return False
-                for f in fixtures(w[1:i]):
+                for f in selection(w[1:i]):
                     self.programmer.setdefault(f, {})[w[i + 1]] = float(w[i + 3])
                 return True
-            self.selection = fixtures(w[1:])
+            self.selection = selection(w[1:])
             return True
         if len(w) >= 3 and w[0] == "Off" and w[1] == "Fixture":
-            for f in fixtures(w[2:]):
+            for f in selection(w[2:]):
                 self.programmer.pop(f, None)
             return True
         if w[:2] == ["Store", "Preset"] and len(w) == 4 and w[3] == "/Overwrite":

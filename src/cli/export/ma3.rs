@@ -10,12 +10,8 @@ use crate::ma3::commands::{Target, store_commands};
 /// Arguments of `export ma3`.
 #[derive(clap::Args)]
 pub struct Args {
-    /// The scene folder the looks were saved on (its channels are the MA3 fixture IDs).
-    #[arg(long)]
-    scene: PathBuf,
-    /// The daemon's saved looks: its state folder's `looks.json`.
-    #[arg(long)]
-    looks: PathBuf,
+    #[command(flatten)]
+    saved: super::Saved,
     /// The folder to write the plugin's two files into.
     #[arg(long)]
     out: PathBuf,
@@ -28,9 +24,6 @@ pub struct Args {
     /// The first cue's number, with --sequence.
     #[arg(long, default_value_t = 1)]
     first: u32,
-    /// Every cue's fade time, in seconds.
-    #[arg(long, default_value_t = 3.0)]
-    time: f32,
     /// The plugin's name and its files' (NAME.xml, NAME.lua).
     #[arg(long, default_value = "visobjd_looks")]
     name: String,
@@ -38,9 +31,6 @@ pub struct Args {
 
 /// Runs `export ma3`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    if !(args.time.is_finite() && (0.0..=3600.0).contains(&args.time)) {
-        anyhow::bail!("--time must be 0..=3600 seconds, got {}", args.time);
-    }
     if args.name.is_empty()
         || !args
             .name
@@ -63,7 +53,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         (None, Some(_)) => anyhow::bail!("--sequence and --first must be 1..=9999"),
         _ => anyhow::bail!("say where the looks go: --preset POOL.NUMBER or --sequence N"),
     };
-    let (scene, saved) = super::saved_looks(&args.scene, &args.looks)?;
+    let (scene, saved) = args.saved.load()?;
     let mut commands = Vec::new();
     for (i, (n, file)) in saved.looks.iter().enumerate() {
         let (look, refused) = file.fit(&scene);
@@ -73,7 +63,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let target = first.next(i as u32);
         commands.push(format!("-- saved look {n}: {target}"));
         commands.extend(
-            store_commands(&scene, &look, target, Some(&file.label), args.time)
+            store_commands(&scene, &look, target, Some(&file.label), args.saved.time)
                 .into_iter()
                 .map(|c| format!("Cmd({})", lua_string(&c))),
         );

@@ -5,7 +5,7 @@
 mod ma3;
 mod usitt;
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 
@@ -37,18 +37,37 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
 }
 
-/// The saved looks of a daemon's `looks.json` (its state folder's) and the scene they are
-/// played on.
-fn saved_looks(scene: &Path, looks: &Path) -> anyhow::Result<(Scene, LooksFile)> {
-    let scene = Scene::load(scene).map_err(|e| anyhow::anyhow!("{e}"))?;
-    let saved = super::gallery::read_saved_looks(looks)?;
-    if saved.looks.is_empty() {
-        anyhow::bail!(
-            "{}: no saved looks to export (save some with /vo/look/save)",
-            looks.display()
-        );
+/// What every export reads: the daemon's saved looks, the scene they were saved on, and
+/// the time each stored cue takes.
+#[derive(clap::Args)]
+struct Saved {
+    /// The scene folder the looks were saved on (its channels are the console's).
+    #[arg(long)]
+    scene: PathBuf,
+    /// The daemon's saved looks: its state folder's `looks.json`.
+    #[arg(long)]
+    looks: PathBuf,
+    /// Every cue's time, in seconds.
+    #[arg(long, default_value_t = 3.0)]
+    time: f32,
+}
+
+impl Saved {
+    /// The scene and the saved looks (at least one), the time checked.
+    fn load(&self) -> anyhow::Result<(Scene, LooksFile)> {
+        if !(self.time.is_finite() && (0.0..=3600.0).contains(&self.time)) {
+            anyhow::bail!("--time must be 0..=3600 seconds, got {}", self.time);
+        }
+        let scene = Scene::load(&self.scene).map_err(|e| anyhow::anyhow!("{e}"))?;
+        let saved = super::gallery::read_saved_looks(&self.looks)?;
+        if saved.looks.is_empty() {
+            anyhow::bail!(
+                "{}: no saved looks to export (save some with /vo/look/save)",
+                self.looks.display()
+            );
+        }
+        Ok((scene, saved))
     }
-    Ok((scene, saved))
 }
 
 /// Writes `text` to `out` atomically (a temporary file beside it, synced, renamed over it).

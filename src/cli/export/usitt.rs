@@ -30,32 +30,22 @@ const LINE: usize = 80;
 /// Arguments of `export ascii`.
 #[derive(clap::Args)]
 pub struct Args {
-    /// The scene folder the looks were saved on.
-    #[arg(long)]
-    scene: PathBuf,
-    /// The daemon's saved looks: its state folder's `looks.json`.
-    #[arg(long)]
-    looks: PathBuf,
+    #[command(flatten)]
+    saved: super::Saved,
     /// The file to write.
     #[arg(long)]
     out: PathBuf,
     /// The first cue's number; the next looks take the next whole numbers.
     #[arg(long, default_value_t = 1)]
     first: u32,
-    /// Every cue's up and down time, in seconds.
-    #[arg(long, default_value_t = 3.0)]
-    time: f32,
 }
 
 /// Runs `export ascii`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    if !(args.time.is_finite() && (0.0..=3600.0).contains(&args.time)) {
-        anyhow::bail!("--time must be 0..=3600 seconds, got {}", args.time);
-    }
     if args.first == 0 || args.first > 9999 {
         anyhow::bail!("--first must be a cue number 1..=9999, got {}", args.first);
     }
-    let (scene, saved) = super::saved_looks(&args.scene, &args.looks)?;
+    let (scene, saved) = args.saved.load()?;
     let mut cues = Vec::with_capacity(saved.looks.len());
     for (i, (n, file)) in saved.looks.iter().enumerate() {
         let (look, refused) = file.fit(&scene);
@@ -64,7 +54,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         cues.push((args.first + i as u32, file.label.clone(), look));
     }
-    let text = show(&scene, &cues, args.time);
+    let text = show(&scene, &cues, args.saved.time);
     super::write(&args.out, &text)?;
     println!(
         "{}: {} cues ({} to {}) of scene `{}`, intensities only",
