@@ -1,4 +1,4 @@
-//! `visobjd export ascii` on the looks a running daemon saved, read back by an independent
+//! `visobjd export usitt` on the looks a running daemon saved, read back by an independent
 //! USITT ASCII reader written from the standard (tests/peers/usitt_ascii.py).
 
 use std::collections::BTreeMap;
@@ -63,7 +63,7 @@ fn saved_looks_become_usitt_ascii_cues_any_console_reads() {
     let out = temp_dir("export-ascii-out").join("show.asc");
     let run = Command::new(bin())
         .arg("export")
-        .arg("ascii")
+        .arg("usitt")
         .arg("--scene")
         .arg(d.dir.join("scene"))
         .arg("--looks")
@@ -107,7 +107,7 @@ fn saved_looks_become_usitt_ascii_cues_any_console_reads() {
     let empty = temp_dir("export-ascii-empty");
     std::fs::write(empty.join("looks.json"), r#"{"looks":{}}"#).unwrap();
     let run = Command::new(bin())
-        .args(["export", "ascii", "--scene"])
+        .args(["export", "usitt", "--scene"])
         .arg(d.dir.join("scene"))
         .arg("--looks")
         .arg(empty.join("looks.json"))

@@ -23,7 +23,7 @@ pub struct Args {
 enum Format {
     /// USITT ASCII (Ident 3:0): every saved look as a cue of channel levels, which Eos,
     /// Ion, Element, Strand and many other consoles import.
-    Ascii(usitt::Args),
+    Usitt(usitt::Args),
     /// A grandMA3 plugin (XML and Lua) that stores every saved look as a preset or a cue
     /// when run on the desk.
     Ma3(ma3::Args),
@@ -32,7 +32,7 @@ enum Format {
 /// Runs `export`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     match args.format {
-        Format::Ascii(a) => usitt::run(a),
+        Format::Usitt(a) => usitt::run(a),
         Format::Ma3(a) => ma3::run(a),
     }
 }

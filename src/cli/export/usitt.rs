@@ -1,4 +1,4 @@
-//! `visobjd export ascii`: the saved looks as a USITT ASCII show file ("ASCII Text
+//! `visobjd export usitt`: the saved looks as a USITT ASCII show file ("ASCII Text
 //! Representation for Lighting Console Data", version 3.0, 1992), which Eos, Ion,
 //! Element, Strand and many other consoles import:
 //!
@@ -27,7 +27,7 @@ use visobjd_scene::look::Look;
 /// The longest line the standard allows.
 const LINE: usize = 80;
 
-/// Arguments of `export ascii`.
+/// Arguments of `export usitt`.
 #[derive(clap::Args)]
 pub struct Args {
     #[command(flatten)]
@@ -40,7 +40,7 @@ pub struct Args {
     first: u32,
 }
 
-/// Runs `export ascii`.
+/// Runs `export usitt`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     if args.first == 0 || args.first > 9999 {
         anyhow::bail!("--first must be a cue number 1..=9999, got {}", args.first);
