@@ -329,6 +329,7 @@ fn merge(rig: &Rig, name: &str, old: Option<&SceneFile>, prune: bool) -> Merged 
             address: f.address,
             emitter_basis: kept.map(|l| l.emitter_basis.clone()).unwrap_or_default(),
             emitter_measured: kept.map(|l| l.emitter_measured.clone()).unwrap_or_default(),
+            ma3_id: before.and_then(|l| l.ma3_id),
         });
     }
     let imported = lights.len();

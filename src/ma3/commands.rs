@@ -13,7 +13,7 @@
 //! ```
 //!
 //! The levels are the DMX output's own ([`Patch::light_slots`] at master 1). MA3 fixture
-//! IDs are the scene's channel numbers (an MVR's `FixtureID`).
+//! IDs are the lights' `ma3_id`, by default their channel numbers (an MVR's `FixtureID`).
 
 use std::fmt;
 
@@ -106,14 +106,14 @@ pub fn store_commands(
                 let decimals = if slot == Slot::Intensity16 { 3 } else { 1 };
                 cmds.push(format!(
                     "Fixture {} Attribute \"{a}\" At {}",
-                    light.channel,
+                    light.ma3_id,
                     percent(v, decimals)
                 ));
             }
         }
     }
-    let channels: Vec<u32> = scene.lights.iter().map(|l| l.channel).collect();
-    let fixtures = channel_list(&channels);
+    let ids: Vec<u32> = scene.lights.iter().map(|l| l.ma3_id).collect();
+    let fixtures = channel_list(&ids);
     cmds.push(format!("Fixture {fixtures}"));
     cmds.push(format!("Store {target} /Overwrite"));
     if let Some(label) = label.map(quoted).filter(|l| !l.is_empty()) {

@@ -146,6 +146,26 @@ fn a_preset_and_a_cue_reach_the_desk_as_ma3_commands_with_the_wire_values() {
 
     let why = d.refused("/vo/ma3/preset", vec![string("21")]);
     assert!(why.contains("POOL.NUMBER"), "{why}");
+    let sent = sent + num(&r.args[1]) as usize;
+
+    // A light whose MA3 fixture ID is not its channel (`ma3_id`), after a reload; two
+    // lights with one ID are refused.
+    let toml = d.dir.join("scene/scene.toml");
+    let scene = std::fs::read_to_string(&toml).unwrap();
+    let with_id =
+        |id: u32| scene.replacen("channel = 6\n", &format!("channel = 6\nma3_id = {id}\n"), 1);
+    std::fs::write(&toml, with_id(5)).unwrap();
+    let why = d.err("/vo/reload", vec![]);
+    assert!(why.contains("both have grandMA3 fixture ID 5"), "{why}");
+    std::fs::write(&toml, with_id(106)).unwrap();
+    d.ok("/vo/reload", vec![], "/vo/reloaded");
+    let r = d.ok("/vo/ma3/preset", vec![string("21.6")], "/vo/ma3/sent");
+    let state = desk.state_after(sent + num(&r.args[1]) as usize);
+    let values = &state["presets"]["21.6"]["values"];
+    assert!(
+        values.get("106").is_some() && values.get("6").is_none(),
+        "{values}"
+    );
 }
 
 #[test]

@@ -117,6 +117,9 @@ pub struct LightFile {
     /// profile's, so the light reaches the colour asked of it.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub emitter_measured: BTreeMap<String, MeasuredEmitter>,
+    /// The light's fixture ID on a grandMA3, when it is not its channel.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ma3_id: Option<u32>,
 }
 
 /// One emitter's colour measured from its image: CIE 1931 xy and its output relative to
@@ -191,6 +194,8 @@ pub struct Light {
     /// Each emitter's CIE XYZ at full as measured from its image (`emitter_measured`), in
     /// slot order; empty: the profile's emitters.
     pub emitter_measured: Vec<[f64; 3]>,
+    /// Its fixture ID on a grandMA3 (`ma3_id`, by default the channel), unique.
+    pub ma3_id: u32,
 }
 
 /// A light group ("system"): sampling assigns one value per group by default.
@@ -400,7 +405,24 @@ impl Scene {
                 address: l.address,
                 emitter_basis: emitter_basis.into_iter().map(|p| dir.join(p)).collect(),
                 emitter_measured,
+                ma3_id: l.ma3_id.unwrap_or(l.channel),
             });
+        }
+        let mut ma3_ids: HashMap<u32, u32> = HashMap::with_capacity(lights.len());
+        for l in &lights {
+            if l.ma3_id == 0 {
+                return Err(invalid(format!(
+                    "light {}: ma3_id must be a grandMA3 fixture ID, 1 or more",
+                    l.channel
+                )));
+            }
+            if let Some(other) = ma3_ids.insert(l.ma3_id, l.channel) {
+                return Err(invalid(format!(
+                    "lights {other} and {} both have grandMA3 fixture ID {} (ma3_id, by \
+                     default the channel): give one its own ma3_id",
+                    l.channel, l.ma3_id
+                )));
+            }
         }
         // A declared group no light uses would be an empty sampling unit: drop it.
         groups.retain(|g| !g.lights.is_empty());
