@@ -143,6 +143,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "s",
         3.0,
     ));
+    rows.push(parse_row(if args.quick { 2 } else { 5 })?);
     rows.push(Row::at_most(
         format!(
             "resident memory, {} MB of basis kept (was {} MB before load)",
@@ -539,6 +540,62 @@ fn cpu_ms() -> f64 {
         .filter_map(|f| f.parse().ok())
         .collect();
     fields.iter().sum::<f64>() * 10.0
+}
+
+/// Lights of the small and the large scene.toml of the parse row.
+const PARSE: (usize, usize) = (1000, 16000);
+
+/// The parse row: `Scene::parse`'s time per light at 16,000 lights over its time per light
+/// at 1,000, each the best of `reps` parses taken in turns (so a busy spell of the host
+/// slows both alike): a step that grows with lights x groups shows as a ratio far above 1
+/// (it read 18-19 when group names were looked up in a list); linear reads about 1.1 on a
+/// quiet host, up to 2 on a busy one, so the target is 3. Each light is its own group, as
+/// an imported rig's ungrouped fixtures are, and the profiles alternate.
+fn parse_row(reps: usize) -> anyhow::Result<Row> {
+    let dir = Path::new("bench-parse");
+    let texts = [scene_toml(PARSE.0), scene_toml(PARSE.1)];
+    let mut best = [f64::INFINITY; 2];
+    for _ in 0..reps {
+        for (text, best) in texts.iter().zip(&mut best) {
+            let started = Instant::now();
+            let scene = visobjd_scene::Scene::parse(dir, text)?;
+            *best = best.min(started.elapsed().as_secs_f64());
+            std::hint::black_box(scene);
+        }
+    }
+    let (small, large) = (best[0] / PARSE.0 as f64, best[1] / PARSE.1 as f64);
+    Ok(Row {
+        name: format!(
+            "scene.toml parse, time per light at {} over {} ({:.1} us at {})",
+            PARSE.1,
+            PARSE.0,
+            small * 1e6,
+            PARSE.0
+        ),
+        value: large * 1e6,
+        unit: "us",
+        ratio: large / small,
+        target: Some(3.0),
+        more: false,
+        note: String::new(),
+    })
+}
+
+/// The scene.toml of `lights` ungrouped lights (each its own group), 128 to a universe.
+fn scene_toml(lights: usize) -> String {
+    let mut toml = String::from("name = \"bench, parse\"\n");
+    for i in 0..lights {
+        let profile = if i % 2 == 0 { "dimmer" } else { "irgb" };
+        toml += &format!(
+            "[[light]]\nchannel = {}\nbasis = \"basis/{:05}.exr\"\nprofile = \"{profile}\"\n\
+             universe = {}\naddress = {}\n",
+            i + 1,
+            i + 1,
+            i / 128 + 1,
+            (i % 128) * 4 + 1
+        );
+    }
+    toml
 }
 
 /// Writes the synthetic scene: smooth coloured spots over a dim wash, one per light,

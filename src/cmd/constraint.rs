@@ -6,16 +6,13 @@
 use rosc::{OscMessage, OscType};
 
 use super::{Context, Named, group, int, light, num_arg, switch_arg, text};
-use crate::engine::rules::{Exclude, MAX_RATIO, Pin, check_saturation};
+use crate::engine::rules::{Exclude, MAX_PINS, MAX_RATIO, Pin, check_saturation};
 use crate::engine::session::Session;
 use crate::engine::{Outcome, Refusal, msg};
 use crate::osc::args::{self, Request};
 use visobjd_method::constrain::Saturation;
 use visobjd_method::objective::Region;
 use visobjd_scene::Scene;
-
-/// Pins kept at most: each is a few bytes, but a flood must not grow the state file.
-const MAX_PINS: usize = 64;
 
 pub enum Cmd {
     GroupKey {

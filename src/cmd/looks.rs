@@ -4,7 +4,7 @@
 use rosc::OscMessage;
 
 use super::{Context, int, int_arg, text};
-use crate::engine::session::{Change, Session};
+use crate::engine::session::{Change, MAX_LABEL, MAX_LOOKS, Session};
 use crate::engine::{Outcome, Refusal, msg};
 use crate::osc::args::{self, Request};
 use visobjd_scene::look::LookFile;
@@ -24,7 +24,7 @@ impl Cmd {
         let n = |req: &Request| int_arg(req, 0, "look number", 1, MAX_LOOK).map(|n| n as u32);
         Ok(Some(if req.matches("/vo/look/save").is_some() {
             let label = match req.arg(1) {
-                Some(a) => Some(args::string(a, "label")?.to_string()),
+                Some(a) => Some(label(args::string(a, "label")?)?),
                 None => None,
             };
             Cmd::Save { n: n(req)?, label }
@@ -46,6 +46,12 @@ impl Cmd {
             Cmd::Save { n, label } => {
                 let label = label.unwrap_or_else(|| format!("Look {n}"));
                 cx.change_looks(|s, looks| {
+                    if looks.len() >= MAX_LOOKS && !looks.contains_key(&n) {
+                        return Err(Refusal::conflict(format!(
+                            "there are already {MAX_LOOKS} saved looks, the most a session \
+                             keeps: save over one, or delete one first (/vo/look/delete n)"
+                        )));
+                    }
                     looks.insert(n, LookFile::from_look(scene, &s.live, &label));
                     Ok(())
                 })
@@ -72,6 +78,17 @@ impl Cmd {
             Cmd::List => cx.commit(|s| Ok(Outcome::replies(list(s)))),
         }
     }
+}
+
+/// A look's label, refused past [`MAX_LABEL`] characters.
+fn label(text: &str) -> Result<String, String> {
+    let n = text.chars().count();
+    if n > MAX_LABEL {
+        return Err(format!(
+            "a look's label is at most {MAX_LABEL} characters, got {n}"
+        ));
+    }
+    Ok(text.to_string())
 }
 
 /// One `/vo/look n label` per saved look, then `/vo/looks/end count`.

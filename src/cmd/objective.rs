@@ -3,7 +3,7 @@
 use rosc::{OscMessage, OscType};
 
 use super::{Context, int, int_arg, num_arg, rgb_args, text};
-use crate::engine::session::{Entry, Session};
+use crate::engine::session::{Entry, MAX_IMAGE_NAME, MAX_OBJECTIVES, Session};
 use crate::engine::{Outcome, Refusal, msg};
 use crate::osc::args::{self, Request};
 use visobjd_method::objective::{Aspects, Objective, Region};
@@ -59,6 +59,12 @@ impl Cmd {
     pub fn parse(req: &Request) -> Result<Option<Cmd>, String> {
         if req.matches("/vo/objective/add").is_some() {
             let image = args::string(req.required(0, "image")?, "image")?;
+            let n = image.chars().count();
+            if n > MAX_IMAGE_NAME {
+                return Err(format!(
+                    "an objective's image name is at most {MAX_IMAGE_NAME} characters, got {n}"
+                ));
+            }
             return Ok(Some(Cmd::Add {
                 image: image.to_string(),
                 aspects: aspects(req, 1)?,
@@ -190,8 +196,11 @@ impl Cmd {
 
 /// `/vo/objective/add`: the reference is read with the session unlocked, then added.
 fn add(cx: &Context, image: &str, aspects: Aspects) -> Result<Vec<OscMessage>, Refusal> {
+    // Checked before the slow read too, so a full session refuses at once.
+    room(&cx.engine.session())?;
     let objective = cx.engine.read_objective(image, aspects)?;
     cx.commit(|s| {
+        room(s)?;
         let id = s.next_id;
         s.next_id += 1;
         let st = objective.analysis.stats;
@@ -208,6 +217,17 @@ fn add(cx: &Context, image: &str, aspects: Aspects) -> Result<Vec<OscMessage>, R
         );
         Ok(Outcome::reply(added).saved().pushed())
     })
+}
+
+/// Refuses a new objective when the session has [`MAX_OBJECTIVES`].
+fn room(s: &Session) -> Result<(), Refusal> {
+    if s.objectives.len() >= MAX_OBJECTIVES {
+        return Err(Refusal::conflict(format!(
+            "there are already {MAX_OBJECTIVES} objectives, the most a session keeps: remove \
+             one first (/vo/objective/<id>/remove)"
+        )));
+    }
+    Ok(())
 }
 
 pub fn list(s: &Session) -> Vec<OscMessage> {

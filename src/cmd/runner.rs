@@ -26,6 +26,11 @@ impl Runner {
         Runner { engine }
     }
 
+    /// The engine it runs on.
+    pub fn engine(&self) -> &Arc<Engine> {
+        &self.engine
+    }
+
     /// Parses and applies one message from `peer`: its replies, or why nothing changed. A
     /// backup answers queries but refuses changes: they come from its main.
     pub fn run(&self, req: &Request, peer: &Peer) -> Result<Vec<OscMessage>, Refusal> {

@@ -292,7 +292,7 @@ impl Config {
                 "generate.clusters must be 1..=64",
             ),
             (
-                (1..=16).contains(&g.palette),
+                (1..=crate::engine::session::MAX_PALETTE as u32).contains(&g.palette),
                 "generate.palette must be 1..=16",
             ),
             (

@@ -23,6 +23,8 @@ pub(super) struct Backups {
     followers: Mutex<Vec<Arc<dyn Follower>>>,
     /// Generate count, clusters and fade of a fresh session (a backup's re-sync).
     defaults: (u32, u32, f32),
+    /// A backup's: why it is not following its main, while it is not (`/vo/status`).
+    problem: Mutex<Option<String>>,
 }
 
 impl Backups {
@@ -35,6 +37,7 @@ impl Backups {
                 config.generate.clusters,
                 config.output.fade_s,
             ),
+            problem: Mutex::new(None),
         }
     }
 
@@ -47,6 +50,42 @@ impl Engine {
     /// The main this daemon is a backup of (`[backup] main`), if it is one.
     pub fn main(&self) -> Option<&str> {
         self.backups.main.as_deref()
+    }
+
+    /// A backup's: why it is not following its main now, if it is not (what
+    /// `/vo/status` shows beside a scene that did not load).
+    pub fn backup_problem(&self) -> Option<String> {
+        self.backups
+            .problem
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .clone()
+    }
+
+    /// A backup's: records why it is not following its main (None: it follows again), and
+    /// tells subscribers when that changed.
+    pub fn set_backup_problem(&self, problem: Option<String>) {
+        {
+            let mut now = self
+                .backups
+                .problem
+                .lock()
+                .unwrap_or_else(|p| p.into_inner());
+            if *now == problem {
+                return;
+            }
+            *now = problem;
+        }
+        let s = self.session();
+        let pushes = self.feedback(&s);
+        self.publish(s, &pushes);
+    }
+
+    /// A backup's: the largest frame it takes from its main, the largest state a main of
+    /// this scene can send ([`super::state_size`]), and never less than a client's frame.
+    pub fn backup_frame_limit(&self) -> usize {
+        super::state_size::max_state_message(&self.stage().scene)
+            .max(crate::osc::framing::MAX_FRAME)
     }
 
     /// Sends an accepted command to every backup (call with the session locked, so they
@@ -96,7 +135,19 @@ impl Engine {
             )));
         }
         let s = self.session();
-        let state = handover::state_json(&self.stage().scene, &s).map_err(Refusal::internal)?;
+        let scene = &self.stage().scene;
+        let state = handover::state_json(scene, &s).map_err(Refusal::internal)?;
+        // What the backup will say too, said here where the state is (a backup of this
+        // scene takes no larger frame): saved looks of a larger rig, or a state file
+        // edited past the session's limits.
+        let bytes: usize = state.iter().map(|part| part.len() + 4).sum::<usize>() + 28;
+        let limit = super::state_size::max_state_message(scene);
+        if bytes > limit {
+            tracing::error!(
+                "backup {}: this main's state is about {bytes} bytes, over the {limit} a backup of this scene takes: it will not follow (saved looks made on a larger rig? delete them or save them again)",
+                backup.addr()
+            );
+        }
         let state = msg("/vo/backup/state", state.map(OscType::String).into());
         if !backup.send(&[state]) {
             return Err(Refusal::internal(
@@ -127,13 +178,21 @@ impl Engine {
             tracing::error!("backup: the main's state: not taken: {what}");
         }
         taken.gallery = taken.gallery.map(|g| self.received_gallery(g));
-        self.commit(None, |s| {
+        // Once the session is the main's, the backup follows: a state file it cannot write
+        // (a full disk) is logged, and does not make it re-subscribe for the same state.
+        let written = self.commit(None, |s| {
             *s = taken;
             Ok(Outcome::replies(Vec::new()).show_look(0.0).saved().pushed())
-        })?;
+        });
         self.commit(None, |_| Ok(Outcome::replies(Vec::new()).show_master()))?;
         let looks = self.session().looks.clone();
-        self.save_looks(&looks)
+        for e in [written.err(), self.save_looks(&looks).err()]
+            .into_iter()
+            .flatten()
+        {
+            tracing::error!("backup: the main's state is taken, but {e}");
+        }
+        Ok(())
     }
 
     /// A backup takes the gallery its main's generate installed (`/vo/backup/gallery`),

@@ -5,7 +5,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::persist::{LiveFile, LooksFile, SessionFile, Snapshot, apply_session};
-use super::session::{Change, Gallery, Session};
+use super::session::{Change, Gallery, HISTORY, Session};
 use visobjd_method::gallery::Generation;
 use visobjd_scene::Scene;
 use visobjd_scene::look::LookFile;
@@ -210,6 +210,19 @@ pub fn from_state(
     let stack = |files: &[LookFile]| -> Result<Vec<visobjd_scene::look::Look>, String> {
         files.iter().map(|f| f.to_look(scene)).collect()
     };
+    // A main's history is at most HISTORY steps each way, as this backup's; a longer one
+    // (a main of another version) is cut to the newest HISTORY steps, said here: an undo
+    // or redo on the main that reaches past them fails here, and the backup subscribes
+    // again (src/backup.rs).
+    for (what, steps) in [("undo", working.undo.len()), ("redo", working.redo.len())] {
+        if steps > HISTORY {
+            lost.push(format!(
+                "{} of the main's {steps} {what} steps, the farthest from its look: this \
+                 backup keeps {HISTORY}",
+                steps - HISTORY
+            ));
+        }
+    }
     match (stack(&working.undo), stack(&working.redo)) {
         (Ok(undo), Ok(redo)) => s.set_history(undo, redo, working.last_change),
         (Err(e), _) | (_, Err(e)) => lost.push(format!("the undo history: {e}")),
@@ -301,6 +314,28 @@ mod tests {
         // The history goes on as on the main.
         assert_eq!(s.redo(1), Ok(0));
         assert_eq!(s.base, look(0.2));
+    }
+
+    #[test]
+    fn a_history_longer_than_the_backups_is_cut_to_it_and_said() {
+        let scene = scene();
+        let main = busy(&scene);
+        let mut parts = state_json(&scene, &main).unwrap();
+        // A main keeping more undo steps than this backup (another version's HISTORY).
+        let mut working: WorkingFile = serde_json::from_str(&parts[3]).unwrap();
+        working.undo = (0..HISTORY + 6)
+            .map(|i| LookFile::from_look(&scene, &look(i as f32 / 100.0), ""))
+            .collect();
+        parts[3] = serde_json::to_string(&working).unwrap();
+        let (s, lost) = from_state(&scene, &parts, Session::new(&scene, 1, 1, 0.0)).unwrap();
+        assert_eq!(lost.len(), 1, "{lost:?}");
+        assert!(
+            lost[0].contains(&format!("6 of the main's {} undo steps", HISTORY + 6)),
+            "{lost:?}"
+        );
+        let (undo, _, _) = s.history();
+        assert_eq!(undo.len(), HISTORY);
+        assert_eq!(undo[0], look(6.0 / 100.0), "the newest are kept");
     }
 
     #[test]

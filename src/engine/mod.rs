@@ -18,8 +18,8 @@
 //! for); `refusal` (why one was refused); `generate` and `explore` (galleries);
 //! `references` (the reference images); `reload` (the running config and scene, swapped
 //! whole by a reload); `view` (what tablets are shown); `pushes`
-//! (subscribers and the web page's event stream); `backups` and `handover` (a main's
-//! replication); `console` (the console's sACN); `export` (to Eos); `persist` and `writer`
+//! (subscribers and the web page's event stream); `backups`, `handover` and `state_size` (a
+//! main's replication, and the largest state it hands a backup); `console` (the console's sACN); `export` (to Eos); `persist` and `writer`
 //! (the state folder); `threads`; `test_hooks`.
 
 mod backups;
@@ -37,6 +37,7 @@ mod refusal;
 mod reload;
 pub mod rules;
 pub mod session;
+pub mod state_size;
 mod test_hooks;
 mod threads;
 mod view;

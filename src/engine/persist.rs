@@ -12,7 +12,10 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use super::rules::RulesFile;
-use super::session::{CLUSTERS, COUNT, Entry, FADE_S, SEED, Session};
+use super::session::{
+    CLUSTERS, COUNT, Entry, FADE_S, MAX_IMAGE_NAME, MAX_LABEL, MAX_LOOKS, MAX_OBJECTIVES,
+    MAX_PALETTE, SEED, Session,
+};
 use visobjd_files::{Loaded, load_json, save_json};
 use visobjd_method::objective::ObjectiveRecord;
 use visobjd_scene::Scene;
@@ -208,16 +211,35 @@ impl LiveFile {
 }
 
 impl LooksFile {
-    /// Leaves out each saved look's lights whose numbers are not levels, with a sentence
-    /// for each (channels are not checked: a saved look outlives a patch).
+    /// Leaves out what a session may not hold, with a sentence for each: each saved look's
+    /// lights whose numbers are not levels (channels are not checked: a saved look
+    /// outlives a patch), a label past [`MAX_LABEL`] characters (cut to it), and looks past
+    /// [`MAX_LOOKS`] (the highest numbers).
     pub fn drop_invalid(&mut self) -> Vec<String> {
         let mut lost = Vec::new();
+        if self.looks.len() > MAX_LOOKS
+            && let Some((&first, _)) = self.looks.iter().nth(MAX_LOOKS)
+        {
+            let past = self.looks.split_off(&first);
+            lost.push(format!(
+                "{} saved looks past the {MAX_LOOKS} a session keeps: looks {first} and above \
+                 were left out",
+                past.len()
+            ));
+        }
         for (n, look) in &mut self.looks {
             lost.extend(
                 look.drop_invalid()
                     .into_iter()
                     .map(|e| format!("look {n}: {e}")),
             );
+            let chars = look.label.chars().count();
+            if chars > MAX_LABEL {
+                look.label = look.label.chars().take(MAX_LABEL).collect();
+                lost.push(format!(
+                    "look {n}: its label of {chars} characters was cut to {MAX_LABEL}"
+                ));
+            }
         }
         lost
     }
@@ -283,17 +305,45 @@ pub(super) fn apply_session(scene: &Scene, f: &SessionFile, s: &mut Session) -> 
     s.objectives = f
         .objectives
         .iter()
-        .filter_map(|o| match o.record.to_objective() {
-            Ok(objective) => Some(Entry {
-                id: o.id,
-                objective,
-            }),
-            Err(e) => {
-                lost.push(format!("objective {} (`{}`): {e}", o.id, o.record.image));
-                None
+        .filter_map(|o| {
+            let chars = o.record.image.chars().count();
+            let objective = if chars > MAX_IMAGE_NAME {
+                Err(format!(
+                    "its image name has {chars} characters, more than the {MAX_IMAGE_NAME} \
+                     an objective's may have"
+                ))
+            } else if o.record.palette.len() > MAX_PALETTE {
+                Err(format!(
+                    "its palette has {} colours, more than the {MAX_PALETTE} a palette may have",
+                    o.record.palette.len()
+                ))
+            } else {
+                o.record.to_objective()
+            };
+            match objective {
+                Ok(objective) => Some(Entry {
+                    id: o.id,
+                    objective,
+                }),
+                Err(e) => {
+                    let image: String = o.record.image.chars().take(MAX_IMAGE_NAME).collect();
+                    lost.push(format!("objective {} (`{image}`): {e}", o.id));
+                    None
+                }
             }
         })
         .collect();
+    if s.objectives.len() > MAX_OBJECTIVES {
+        let past = s.objectives.split_off(MAX_OBJECTIVES);
+        lost.push(format!(
+            "{} objectives past the {MAX_OBJECTIVES} a session keeps: objectives {} were left out",
+            past.len(),
+            past.iter()
+                .map(|e| e.id.to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        ));
+    }
     s.next_id = f
         .next_id
         .max(s.objectives.iter().map(|e| e.id + 1).max().unwrap_or(1));

@@ -327,7 +327,13 @@ impl Rules {
                 (None, None) => lost.push("an exclusion with neither group nor channel".into()),
             }
         }
-        for p in &f.pins {
+        if f.pins.len() > MAX_PINS {
+            lost.push(format!(
+                "{} pins past the {MAX_PINS} a session keeps were left out",
+                f.pins.len() - MAX_PINS
+            ));
+        }
+        for p in f.pins.iter().take(MAX_PINS) {
             let [x0, y0, x1, y1] = p.region;
             let region = match Region::new(x0, y0, x1, y1) {
                 Ok(r) => r,
@@ -336,11 +342,14 @@ impl Rules {
                     continue;
                 }
             };
-            let lights: Vec<usize> = p
+            let mut lights: Vec<usize> = p
                 .channels
                 .iter()
                 .filter_map(|&ch| light(ch, &format!("pin {}", p.id), &mut lost))
                 .collect();
+            // Each light once, in light order, as a pin added here holds them.
+            lights.sort_unstable();
+            lights.dedup();
             self.pins.push(Pin {
                 id: p.id,
                 region,
@@ -353,6 +362,10 @@ impl Rules {
         lost
     }
 }
+
+/// Pins kept at most: each is a few bytes, but a flood must not grow the state file (nor
+/// the state a backup takes, src/engine/state_size.rs).
+pub const MAX_PINS: usize = 64;
 
 /// The largest ratio `/vo/group/<B>/ratio` takes.
 pub const MAX_RATIO: f32 = 100.0;

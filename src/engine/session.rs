@@ -28,6 +28,23 @@ pub const SEED: RangeInclusive<u64> = 0..=visobjd_method::gallery::MAX_SEED;
 /// Crossfade seconds (`/vo/fade`, `session.json`).
 pub const FADE_S: RangeInclusive<f32> = 0.0..=600.0;
 
+// What a session may hold of what its users name and add (docs/osc.md, "Limits"): far
+// past what a show uses, and what bounds the state a main hands its backups to a size
+// known beforehand (super::state_size). Each is checked where it is accepted (refused
+// with a sentence, nothing changed) and where a state is restored from its files or taken
+// from a main (what is past it is left out, with a sentence).
+
+/// Characters of a saved look's label.
+pub const MAX_LABEL: usize = 100;
+/// Saved looks at once (numbered 1..=9999).
+pub const MAX_LOOKS: usize = 1000;
+/// Objectives at once.
+pub const MAX_OBJECTIVES: usize = 64;
+/// Characters of an objective's image name (a path inside the references folder).
+pub const MAX_IMAGE_NAME: usize = 100;
+/// Colours of an objective's palette (`generate.palette` is 1..=this).
+pub const MAX_PALETTE: usize = 16;
+
 /// An objective with the id OSC addresses use.
 #[derive(Debug, Clone)]
 pub struct Entry {

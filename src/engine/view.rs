@@ -55,7 +55,7 @@ impl Engine {
                 ]);
             }
         }
-        if let Some(problem) = self.scene_problem() {
+        if let Some(problem) = self.problems() {
             args.push(OscType::String("problem".into()));
             args.push(OscType::String(problem));
         }
@@ -68,6 +68,16 @@ impl Engine {
             }
         }
         msg("/vo/status", args)
+    }
+
+    /// What keeps this daemon from doing its job, as one sentence: its scene did not load,
+    /// or (a backup) it is not following its main.
+    fn problems(&self) -> Option<String> {
+        let all: Vec<String> = [self.scene_problem(), self.backup_problem()]
+            .into_iter()
+            .flatten()
+            .collect();
+        (!all.is_empty()).then(|| all.join("; "))
     }
 
     /// What a tablet shows of `s`, pushed to subscribers on every change so buttons and
@@ -99,7 +109,7 @@ impl Engine {
     /// gallery is, what is running.
     pub fn status_text(&self, s: &Session) -> String {
         let mut parts = Vec::new();
-        if let Some(problem) = self.scene_problem() {
+        if let Some(problem) = self.problems() {
             parts.push(problem);
         }
         let stage = self.stage();

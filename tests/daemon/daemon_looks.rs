@@ -301,3 +301,62 @@ fn numbers_not_finite_or_out_of_range_are_dropped_and_the_rest_restored() {
     assert_eq!(d.objectives(), objectives[..1]);
     assert_eq!(d.looks().len(), 2);
 }
+
+/// A session keeps at most 1000 saved looks, each label at most 100 characters (docs/osc.md,
+/// "Limits"): a save past them is refused and changes nothing, and a looks.json holding
+/// more (edited by hand, or from before the limits) is restored to them, each cut named.
+#[test]
+fn a_session_keeps_at_most_1000_looks_with_labels_of_100_characters() {
+    let mut d = Daemon::start("looks-limits");
+    assert!(d.terminate().success());
+    let lights = serde_json::json!([{"channel": 1, "intensity": 0.5}]);
+    let mut looks: serde_json::Map<String, serde_json::Value> = (1..=1001)
+        .map(|n| {
+            let file = serde_json::json!({"label": format!("Look {n}"), "lights": lights});
+            (n.to_string(), file)
+        })
+        .collect();
+    looks["7"]["label"] = serde_json::json!("y".repeat(65_000));
+    let path = d.state_dir().join("looks.json");
+    std::fs::write(&path, serde_json::json!({ "looks": looks }).to_string()).expect("write");
+    d.restart();
+    let log = d.log_text();
+    for what in [
+        "1 saved looks past the 1000 a session keeps: looks 1001 and above were left out",
+        "look 7: its label of 65000 characters was cut to 100",
+    ] {
+        assert!(
+            log.lines()
+                .any(|l| l.contains("looks.json: not restored") && l.contains(what)),
+            "not said: {what}\n{log}"
+        );
+    }
+    let listed = |d: &mut Daemon| {
+        // Over TCP: a thousand replies over UDP on loopback may lose some.
+        let mut tcp = d.tcp(crate::common::daemon::TcpFraming::LengthPrefix);
+        tcp.call("/vo/looks", vec![], "/vo/looks/end")
+    };
+    let got = listed(&mut d);
+    assert_eq!(got.last().map(|m| m.args.clone()), Some(vec![int(1000)]));
+    let seventh = got.iter().find(|m| m.args[0] == int(7)).expect("look 7");
+    assert_eq!(seventh.args[1], string(&"y".repeat(100)));
+
+    let why = d.err("/vo/look/save", vec![int(5000)]);
+    assert!(
+        why.starts_with("look 5000 was not saved: there are already 1000 saved looks"),
+        "{why}"
+    );
+    let why = d.err("/vo/look/save", vec![int(3), string(&"z".repeat(101))]);
+    assert_eq!(why, "a look's label is at most 100 characters, got 101");
+    assert_eq!(listed(&mut d), got, "the refused saves changed nothing");
+    // Saving over a look, or after deleting one, is within the limit.
+    d.ok(
+        "/vo/look/save",
+        vec![int(3), string("over")],
+        "/vo/look/saved",
+    );
+    d.ok("/vo/look/delete", vec![int(4)], "/vo/look/deleted");
+    d.ok("/vo/look/save", vec![int(5000)], "/vo/look/saved");
+    let got = listed(&mut d);
+    assert_eq!(got.last().map(|m| m.args.clone()), Some(vec![int(1000)]));
+}

@@ -328,3 +328,34 @@ fn a_region_that_selects_no_light_is_refused_and_says_so() {
     assert_eq!(listed(&d.objectives()[0]).3, [0.0, 0.0, 0.5, 1.0]);
     std::fs::remove_dir_all(&scene).ok();
 }
+
+/// A session keeps at most 64 objectives, each image named in at most 100 characters
+/// (docs/osc.md, "Limits"): an add past them is refused and changes nothing.
+#[test]
+fn a_session_keeps_at_most_64_objectives() {
+    let mut d = Daemon::start("obj-limits");
+    for _ in 0..64 {
+        d.ok(
+            "/vo/objective/add",
+            vec![string("grey.png")],
+            "/vo/objective/added",
+        );
+    }
+    let why = d.refused("/vo/objective/add", vec![string("grey.png")]);
+    assert!(
+        why.starts_with("there are already 64 objectives, the most a session keeps"),
+        "{why}"
+    );
+    let long = format!("{}.png", "g".repeat(97));
+    let why = d.refused("/vo/objective/add", vec![string(&long)]);
+    assert_eq!(
+        why,
+        "an objective's image name is at most 100 characters, got 101"
+    );
+    d.ok("/vo/objective/last/remove", vec![], "/vo/objective/removed");
+    d.ok(
+        "/vo/objective/add",
+        vec![string("grey.png")],
+        "/vo/objective/added",
+    );
+}

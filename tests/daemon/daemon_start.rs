@@ -155,3 +155,67 @@ fn an_empty_library_under_the_state_folder_starts_with_the_scenes_references() {
         "the library was stocked again"
     );
 }
+
+/// The saved live look goes on the wire before the scene's images are read (docs/reliability.md,
+/// "Starting"): with light 1's basis image a FIFO that no one writes, the daemon blocks
+/// reading it, and meanwhile sends the look it saved; it answers OSC only once the read
+/// ends (here the FIFO is closed empty, so light 1 is left out).
+#[test]
+fn the_saved_look_goes_out_before_the_images_are_read() {
+    use crate::common::daemon::{Proto, int};
+    let mut d = Daemon::start("start-before-images");
+    d.ok("/vo/light/2/level", vec![int(60)], "/vo/light");
+    d.ok("/vo/light/5/level", vec![int(30)], "/vo/light");
+    let saved = d.live();
+    assert!(d.terminate().success());
+
+    let basis = d.dir.join("scene/basis/001.exr");
+    std::fs::remove_file(&basis).expect("remove light 1's image");
+    let made = Command::new("mkfifo").arg(&basis).status().expect("mkfifo");
+    assert!(made.success(), "mkfifo {}", basis.display());
+    let log = d.dir.join("stderr-fifo.log");
+    let mut child = Command::new(bin())
+        .arg("run")
+        .arg("--config")
+        .arg(d.config_path())
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(std::fs::File::create(&log).expect("log"))
+        .spawn()
+        .expect("visobjd starts");
+    // The look, while the daemon is still held in the image read: no answer to OSC yet.
+    d.wire.wait_look(Proto::Sacn, &saved);
+    d.wire.wait_look(Proto::Artnet, &saved);
+    let mut osc = d.client();
+    osc.send("/vo/ping", vec![]);
+    assert!(
+        osc.next(Duration::from_millis(300)).is_none(),
+        "the daemon answered before its images were read: the test did not hold it"
+    );
+    let text = std::fs::read_to_string(&log).unwrap_or_default();
+    assert!(!text.contains("loaded:"), "{text}");
+    // Let the read end: the FIFO opened and closed with nothing in it.
+    drop(
+        std::fs::OpenOptions::new()
+            .write(true)
+            .open(&basis)
+            .expect("open the FIFO"),
+    );
+    let end = Instant::now() + PATIENCE;
+    loop {
+        osc.send("/vo/ping", vec![]);
+        if osc
+            .next(Duration::from_millis(100))
+            .is_some_and(|m| m.addr == "/vo/pong")
+        {
+            break;
+        }
+        assert!(
+            Instant::now() < end,
+            "no answer once the images were read:\n{}",
+            std::fs::read_to_string(&log).unwrap_or_default()
+        );
+    }
+    let _ = child.kill();
+    let _ = child.wait();
+}

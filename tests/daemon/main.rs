@@ -10,6 +10,7 @@ mod booth_unit;
 mod daemon_access;
 mod daemon_args;
 mod daemon_backup;
+mod daemon_backup_resync;
 mod daemon_booth;
 mod daemon_console;
 mod daemon_constraints;

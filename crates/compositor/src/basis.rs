@@ -287,6 +287,22 @@ pub const MAX_PIXELS: usize = 64 << 20;
 /// [`MAX_PIXELS`] in all is refused before anything is allocated for it. Decoding runs
 /// under `catch_unwind`: a hostile file must produce an error, never take the daemon down.
 pub fn read_exr(path: &Path) -> Result<RgbImage, String> {
+    read_exr_on(path, Threads::Pool)
+}
+
+/// How [`read_exr_on`] decompresses a file's blocks.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Threads {
+    /// On a thread pool of the decoder's own, made for the file: what one large image
+    /// read alone wants.
+    Pool,
+    /// On the thread that reads the file: what many files read in parallel want (the
+    /// decoder would otherwise make a pool per file, 16,000 of them for 16,000 lights).
+    Reader,
+}
+
+/// [`read_exr`], decompressing on `threads`.
+fn read_exr_on(path: &Path, threads: Threads) -> Result<RgbImage, String> {
     use exr::prelude::traits::{ReadChannels, ReadLayers};
     use std::io::{BufReader, Seek};
     let mut file = std::fs::File::open(path).map_err(|e| describe_exr_error(e.into()))?;
@@ -303,7 +319,7 @@ pub fn read_exr(path: &Path) -> Result<RgbImage, String> {
     }
     file.rewind().map_err(|e| describe_exr_error(e.into()))?;
     let result = std::panic::catch_unwind(move || {
-        exr::prelude::read()
+        let read = exr::prelude::read()
             .no_deep_data()
             .largest_resolution_level()
             .rgba_channels(
@@ -318,8 +334,11 @@ pub fn read_exr(path: &Path) -> Result<RgbImage, String> {
                 },
             )
             .first_valid_layer()
-            .all_attributes()
-            .from_buffered(BufReader::new(file))
+            .all_attributes();
+        match threads {
+            Threads::Pool => read.from_buffered(BufReader::new(file)),
+            Threads::Reader => read.non_parallel().from_buffered(BufReader::new(file)),
+        }
     });
     match result {
         Ok(Ok(image)) => {
@@ -411,7 +430,8 @@ fn decode(path: &Path) -> Result<(usize, usize, [Vec<f32>; 3]), SceneError> {
         path: path.to_path_buf(),
         message,
     };
-    let img = read_exr(path).map_err(fail)?;
+    // The scene's images are read in parallel, each decoded where it is read.
+    let img = read_exr_on(path, Threads::Reader).map_err(fail)?;
     if img.pixels.iter().flatten().any(|v| !v.is_finite()) {
         return Err(fail(
             "contains NaN or infinite samples; re-export it with finite values".into(),
@@ -593,10 +613,11 @@ pub fn load(scene: &Scene, widths: &[(usize, Precision)]) -> Result<Loaded, Scen
     unseen.sort_by_key(|u| u.light);
     unseen.dedup_by_key(|u| u.light);
     if !unseen.is_empty() {
-        let dark: Vec<bool> = owner
-            .iter()
-            .map(|l| unseen.iter().any(|u| u.light == *l))
-            .collect();
+        let mut unseen_light = vec![false; lights];
+        for u in &unseen {
+            unseen_light[u.light] = true;
+        }
+        let dark: Vec<bool> = owner.iter().map(|&l| unseen_light[l]).collect();
         for img in &mut images {
             let zero: [Vec<f32>; 3] = std::array::from_fn(|_| vec![0.0; img.width * img.height]);
             for (rows, _) in img

@@ -243,6 +243,9 @@ pub struct Scene {
     pub groups: Vec<Group>,
     /// Profiles in use (built-in and custom).
     pub profiles: Vec<Profile>,
+    /// Each group's index by its address form, lower case ([`Scene::group_index`]), as
+    /// parsed.
+    by_address: HashMap<String, usize>,
 }
 
 impl Scene {
@@ -308,6 +311,9 @@ impl Scene {
         let mut raw = file.light;
         raw.sort_by_key(|l| l.channel);
         let mut lights = Vec::with_capacity(raw.len());
+        // Each lookup per light is a hash map's, so parsing stays linear in the lights
+        // (16,000 lights, each its own group, took seconds when these were scans).
+        let mut profile_index: HashMap<&str, usize> = HashMap::new();
         let mut slots: BTreeMap<(u16, u16), u32> = BTreeMap::new();
         for (i, l) in raw.iter().enumerate() {
             if l.channel == 0 {
@@ -319,8 +325,8 @@ impl Scene {
                     l.channel
                 )));
             }
-            let profile = match profiles.iter().position(|p| p.name == l.profile) {
-                Some(p) => p,
+            let profile = match profile_index.get(l.profile.as_str()) {
+                Some(&p) => p,
                 None => {
                     let p = custom
                         .get(&l.profile)
@@ -335,6 +341,7 @@ impl Scene {
                             ))
                         })?;
                     profiles.push(p);
+                    profile_index.insert(&l.profile, profiles.len() - 1);
                     profiles.len() - 1
                 }
             };
@@ -426,18 +433,17 @@ impl Scene {
         }
         // A declared group no light uses would be an empty sampling unit: drop it.
         groups.retain(|g| !g.lights.is_empty());
+        let mut by_address: HashMap<String, usize> = HashMap::with_capacity(groups.len());
         for (i, g) in groups.iter().enumerate() {
             let address = g.address();
-            if let Some(other) = groups[..i]
-                .iter()
-                .find(|o| o.address().eq_ignore_ascii_case(&address))
-            {
+            if let Some(&other) = by_address.get(&address.to_ascii_lowercase()) {
                 return Err(invalid(format!(
                     "groups `{}` and `{}` are both `{address}` in OSC addresses (spaces and \
                      #*,/?[]{{}} are written _, case does not count): rename one",
-                    other.name, g.name
+                    groups[other].name, g.name
                 )));
             }
+            by_address.insert(address.to_ascii_lowercase(), i);
         }
         let mut remap = vec![usize::MAX; group_index.len()];
         for (new, g) in groups.iter().enumerate() {
@@ -454,6 +460,7 @@ impl Scene {
             lights,
             groups,
             profiles,
+            by_address,
         })
     }
 
@@ -468,10 +475,8 @@ impl Scene {
     /// (`/vo/group/front_warm/...` finds `front warm`): loading refuses two groups that
     /// share an address form, so at most one matches.
     pub fn group_index(&self, name: &str) -> Option<usize> {
-        let address = address_segment(name);
-        self.groups
-            .iter()
-            .position(|g| g.address().eq_ignore_ascii_case(&address))
+        let key = address_segment(name).to_ascii_lowercase();
+        self.by_address.get(&key).copied()
     }
 
     /// The profile of light `i`.
