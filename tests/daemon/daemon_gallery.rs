@@ -2,8 +2,8 @@
 //! the real daemon, each with refused cases that change nothing.
 
 use crate::common::daemon::{
-    CLUSTERS, COUNT, Daemon, GENERATE_PATIENCE, LightLevel, Osc, Proto, STAGE, Udp, fixture, float,
-    int, num, same_look, string, text,
+    CLUSTERS, COUNT, Daemon, GENERATE_PATIENCE, LightLevel, Osc, PATIENCE, Proto, STAGE, Udp,
+    fixture, float, int, num, same_look, string, text,
 };
 
 /// A daemon with one objective and a generated gallery; returns it with the entry sizes.
@@ -497,9 +497,10 @@ fn a_colour_only_objective_on_a_dark_stage_lights_its_colours_and_says_so() {
     assert!(d.live().iter().all(|l| l.intensity == 0.0), "a dark start");
     d.add_objective("warm.png", "color");
     let r = d.generate();
-    // The note follows the reply it explains, before anything sent after the generate.
-    let notes: Vec<String> = d
-        .fence()
+    // The note follows the reply it explains (a pong sent meanwhile may come between).
+    let mut got = d.collect("/vo/note", PATIENCE, "the generate's note");
+    got.extend(d.fence());
+    let notes: Vec<String> = got
         .into_iter()
         .filter(|m| m.addr == "/vo/note")
         .map(|m| text(&m.args[0]))
