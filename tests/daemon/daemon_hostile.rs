@@ -363,15 +363,16 @@ fn a_big_reference_decodes_within_its_bound_below_the_clock() {
     // Over the bound: refused from its header, the sentence naming the file and the limit.
     let e = d.refused("/vo/objective/add", vec![string("huge.jpg")]);
     assert!(
-        e.starts_with("huge.jpg would take 42")
-            && e.contains("MiB to decode (a 7000x7000 progressive JPEG), over the 256 MiB"),
+        e.starts_with(
+            "huge.jpg would take 427 MiB to decode (a 7000x7000 progressive JPEG), over the 256 MiB"
+        ),
         "{e}"
     );
     let r = common::http::send(addr, "PUT", "/references/huge2.jpg", &[], &huge);
     assert_eq!(r.status, 400);
     let e = r.json()["error"].as_str().unwrap_or_default().to_string();
     assert!(
-        e.starts_with("upload `huge2.jpg`: would take 42") && e.contains("over the 256 MiB"),
+        e.starts_with("upload `huge2.jpg`: would take 427 MiB") && e.contains("over the 256 MiB"),
         "{e}"
     );
     assert!(!refs.join("huge2.jpg").exists());

@@ -25,6 +25,7 @@ mod daemon_looks;
 mod daemon_objectives;
 mod daemon_peers;
 mod daemon_reload;
+mod daemon_slots;
 mod daemon_start;
 mod eos;
 mod osc_transport;
