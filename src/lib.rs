@@ -5,7 +5,8 @@
 //! each message to the commands ([`cmd`]: parsed once, one file per address family), which
 //! change the session through the [`engine`]; the engine drives the method, the compositor
 //! and DMX, which are crates of their own (`crates/`). [`config`] and [`eos`] (the commands an
-//! Eos console takes) sit below whoever reads them; [`shutdown`] and [`cli`] wire it all.
+//! Eos console takes) sit below whoever reads them; [`slots`] shares the OSC and web
+//! listeners' connections out by host; [`shutdown`] and [`cli`] wire it all.
 //! `docs/architecture.md` draws it.
 
 pub mod backup;
@@ -19,4 +20,5 @@ pub mod http;
 pub mod ma3;
 pub mod osc;
 pub mod shutdown;
+pub mod slots;
 pub mod touchosc;

@@ -5,7 +5,7 @@ use std::net::SocketAddr;
 use rosc::OscMessage;
 
 use super::{Context, int, opt_int_arg};
-use crate::engine::{Outcome, Refusal, msg};
+use crate::engine::{Outcome, Refusal, SUBSCRIPTIONS_PER_HOST, msg};
 use crate::osc::args::Request;
 
 pub enum Cmd {
@@ -39,7 +39,7 @@ impl Cmd {
             Cmd::Status => cx.commit(|s| Ok(Outcome::reply(e.status(s)))),
             Cmd::Subscribe(port) => {
                 let to = SocketAddr::new(from, port.unwrap_or(cx.peer.reply_addr().port()));
-                e.subscribe(from, to);
+                let ended = e.subscribe(from, to);
                 // The whole state goes where the pushes will go, so a tablet that
                 // listens on another port than it sends from is complete at once.
                 let state = cx.commit(|s| {
@@ -59,7 +59,16 @@ impl Cmd {
                         "cannot reach {to} to subscribe it: {err}"
                     )));
                 }
-                Ok(vec![subscribed])
+                let mut replies = vec![subscribed];
+                if let Some(old) = ended {
+                    replies.push(msg(
+                        "/vo/note",
+                        vec![rosc::OscType::String(format!(
+                            "{from} holds at most {SUBSCRIPTIONS_PER_HOST} subscriptions: the oldest, to {old}, ended for this one"
+                        ))],
+                    ));
+                }
+                Ok(replies)
             }
             Cmd::Unsubscribe => {
                 e.unsubscribe(from);

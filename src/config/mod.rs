@@ -15,7 +15,7 @@ mod backup;
 mod peers;
 
 pub use backup::BackupConfig;
-pub use peers::{PeerConfig, PeerFraming, validate_peers};
+pub use peers::{PeerConfig, PeerFraming, validate_backups, validate_peers};
 
 /// The whole configuration, paths resolved.
 #[derive(Debug, Clone)]
@@ -98,6 +98,9 @@ pub struct OscConfig {
     pub allow: Vec<String>,
     /// `[[osc.peer]]`: where known clients get their replies and pushes.
     pub peer: Vec<PeerConfig>,
+    /// The addresses this main's backups connect from: their TCP connections always get a
+    /// slot, as the peers' do.
+    pub backups: Vec<String>,
 }
 
 impl Default for OscConfig {
@@ -108,6 +111,7 @@ impl Default for OscConfig {
             reply_port: 0,
             allow: Vec::new(),
             peer: Vec::new(),
+            backups: Vec::new(),
         }
     }
 }
@@ -276,6 +280,7 @@ impl Config {
             .map(|a| Cidr::parse(a).map_err(|e| at(format!("osc.allow: {e}"))))
             .collect::<Result<Vec<_>, _>>()?;
         validate_peers(&file.osc.peer, &allow).map_err(at)?;
+        validate_backups(&file.osc.backups, &allow).map_err(at)?;
         if let Some(list) = file.input.sacn.as_ref().and_then(|s| s.allow.as_ref()) {
             for a in list {
                 Cidr::parse(a).map_err(|e| at(format!("input.sacn.allow: {e}")))?;

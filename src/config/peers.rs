@@ -1,6 +1,7 @@
 //! The `[[osc.peer]]` entries (docs/config.md): where each known client listens and in which
 //! framing, checked when the config is read; the OSC server routes replies by them
-//! (src/osc/peers.rs).
+//! (src/osc/peers.rs). With `osc.backups` they are the hosts the main knows, whose TCP
+//! connections always get a slot (src/slots.rs).
 
 use std::net::IpAddr;
 
@@ -84,6 +85,29 @@ pub fn validate_peers(peers: &[PeerConfig], allow: &[Cidr]) -> Result<(), String
     Ok(())
 }
 
+/// Checks `osc.backups` (the addresses this main's backups connect from): IPs, heard (on
+/// `allow`, or loopback when it is empty). Ok is the addresses, canonical (an IPv4-mapped
+/// IPv6 address as IPv4); Err is one sentence naming the entry.
+pub fn validate_backups(backups: &[String], allow: &[Cidr]) -> Result<Vec<IpAddr>, String> {
+    backups
+        .iter()
+        .enumerate()
+        .map(|(i, b)| {
+            let ip = b.trim().parse::<IpAddr>().map_err(|_| {
+                format!(
+                    "osc.backups[{i}]: `{b}` is not an IP address such as 10.101.0.11 (a backup's address, no port)"
+                )
+            })?;
+            if !super::permits(allow, ip) {
+                return Err(format!(
+                    "osc.backups[{i}]: {ip} is not on osc.allow, so the backup could never connect"
+                ));
+            }
+            Ok(ip.to_canonical())
+        })
+        .collect()
+}
+
 /// A peer listening on port 9000, for the tests of the config and of the routes.
 #[cfg(test)]
 impl PeerConfig {
@@ -137,5 +161,27 @@ mod tests {
         assert!(validate_peers(&far, &[]).unwrap_err().contains("osc.allow"));
         let allow = [Cidr::parse("10.0.0.0/8").unwrap()];
         assert_eq!(validate_peers(&far, &allow), Ok(()));
+    }
+
+    #[test]
+    fn backups_are_addresses_on_the_allow_list() {
+        let list = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        let ok = validate_backups(&list(&["127.0.0.3", "::ffff:127.0.0.4"]), &[]);
+        assert_eq!(
+            ok,
+            Ok(vec![
+                "127.0.0.3".parse().unwrap(),
+                "127.0.0.4".parse().unwrap()
+            ])
+        );
+        let e = validate_backups(&list(&["10.0.0.2:8000"]), &[]).unwrap_err();
+        assert!(
+            e.starts_with("osc.backups[0]: `10.0.0.2:8000` is not an IP"),
+            "{e}"
+        );
+        let e = validate_backups(&list(&["10.0.0.2"]), &[]).unwrap_err();
+        assert!(e.contains("not on osc.allow"), "{e}");
+        let allow = [Cidr::parse("10.0.0.0/8").unwrap()];
+        assert!(validate_backups(&list(&["10.0.0.2"]), &allow).is_ok());
     }
 }

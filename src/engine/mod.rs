@@ -44,7 +44,7 @@ mod view;
 mod writer;
 
 pub use outcome::Outcome;
-pub use pushes::Pusher;
+pub use pushes::{Pusher, SUBSCRIPTIONS_PER_HOST};
 pub use references::{reference_files, resolve_reference, stock_references};
 pub use refusal::{Refusal, RefusalKind};
 pub use reload::{Loaded, keep_scene};

@@ -17,6 +17,11 @@ use super::session::Session;
 /// How long a subscription lasts without a message from its subscriber (docs/osc.md).
 const SUBSCRIPTION: Duration = Duration::from_secs(600);
 
+/// Subscriptions one sending host may hold (a tablet needs one, a few apps on one machine
+/// a few): each change is pushed to every subscription, so one host's thousands would
+/// delay every change for everyone. A further one ends that host's oldest.
+pub const SUBSCRIPTIONS_PER_HOST: usize = 8;
+
 /// Change batches kept for a slow web page before it is told it fell behind.
 const CHANGES_KEPT: usize = 256;
 
@@ -73,15 +78,22 @@ impl Engine {
         let _ = self.pushes.pusher.set(Box::new(pusher));
     }
 
-    /// Adds or renews a subscription from `from`, pushing to `to`.
-    pub fn subscribe(&self, from: IpAddr, to: SocketAddr) {
+    /// Adds or renews a subscription from `from`, pushing to `to`. When `from` already
+    /// holds [`SUBSCRIPTIONS_PER_HOST`] others, its oldest ends: `Some(where it pushed to)`.
+    pub fn subscribe(&self, from: IpAddr, to: SocketAddr) -> Option<SocketAddr> {
         let mut subs = self.pushes.subscribers();
         subs.retain(|s| s.to != to);
+        // Kept in the order they were made: the host's first is its oldest.
+        let ended = (subs.iter().filter(|s| s.from == from).count() >= SUBSCRIPTIONS_PER_HOST)
+            .then(|| subs.iter().position(|s| s.from == from))
+            .flatten()
+            .map(|i| subs.remove(i).to);
         subs.push(Subscriber {
             from,
             to,
             last_seen: Instant::now(),
         });
+        ended
     }
 
     /// Ends the subscriptions of `from`.

@@ -1,6 +1,9 @@
 //! The references folder: the designer's images, listed, uploaded and read into objectives,
 //! from that folder only (no absolute paths, no `..`, no links out), and decoded one at a
-//! time (a big image takes hundreds of MB while it decodes).
+//! time, within a memory bound (`visobjd_method::decode`: at most 256 MiB, a 64-megapixel
+//! image about 200 MB), on the compute pool: its threads run below the DMX clock and the
+//! OSC threads (nice 10, `crate::cli::COMPUTE_NICE`), so a decode, like a generate, takes
+//! only the time they leave.
 
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
@@ -74,10 +77,8 @@ impl Engine {
                     .to_uppercase()
             )));
         }
-        {
-            let _one = self.references.one_at_a_time();
-            objective::decode_reference_bytes(bytes).map_err(&refused)?;
-        }
+        self.decoded(|| objective::decode_reference_bytes(bytes).map(drop))
+            .map_err(&refused)?;
         let path = self.references().join(name);
         visobjd_files::write_new_atomic(&path, bytes).map_err(|e| match e.kind() {
             std::io::ErrorKind::AlreadyExists => Refusal::conflict(format!(
@@ -93,32 +94,45 @@ impl Engine {
     }
 
     /// Reads and analyses a reference image from the references folder for a new
-    /// objective. One at a time, and slow for a big image: it runs on the sender's own
-    /// handling thread with the session unlocked, so a slow decode holds up only that
-    /// sender, whose later messages then see the objective.
+    /// objective. One at a time, and slow for a big image: the sender's own handling thread
+    /// waits for it with the session unlocked, so a slow decode holds up only that sender,
+    /// whose later messages then see the objective.
     pub fn read_objective(&self, name: &str, aspects: Aspects) -> Result<Objective, Refusal> {
         let path = resolve_reference(&self.references(), name)?;
-        let img = self
-            .decode_reference(&path)
+        let palette = self.config().generate.palette as usize;
+        let analysis = self
+            .decode_reference(&path, |img| objective::analyze(&img, Region::FULL, palette))
             .map_err(|e| Refusal::input(format!("{name} {e}")))?;
         Ok(Objective {
             image: name.to_string(),
             aspects,
             region: Region::FULL,
-            analysis: objective::analyze(
-                &img,
-                Region::FULL,
-                self.config().generate.palette as usize,
-            ),
+            analysis,
         })
     }
 
-    /// Decodes the reference image at `path` (resolved in the references folder), one at a
-    /// time: a big image takes hundreds of MB while it decodes, and a page asks for every
-    /// reference's picture at once. Err is the decoder's phrase ("is not a PNG ...").
-    pub fn decode_reference(&self, path: &Path) -> Result<image::RgbImage, String> {
+    /// Decodes the reference image at `path` (resolved in the references folder) and hands
+    /// it to `then` (an analysis, a thumbnail), both on the compute pool, one decode at a
+    /// time: a big image takes up to [`objective::DECODE_LIMIT`] while it decodes, and a
+    /// page asks for every reference's picture at once. The calling thread waits. Err is
+    /// the decoder's phrase ("is not a PNG ...").
+    pub fn decode_reference<T: Send>(
+        &self,
+        path: &Path,
+        then: impl FnOnce(image::RgbImage) -> T + Send,
+    ) -> Result<T, String> {
+        self.decoded(|| objective::decode_reference(path).map(then))
+    }
+
+    /// Runs `decode` on the compute pool, one at a time.
+    fn decoded<T: Send>(
+        &self,
+        decode: impl FnOnce() -> Result<T, String> + Send,
+    ) -> Result<T, String> {
         let _one = self.references.one_at_a_time();
-        objective::decode_reference(path)
+        // Called from outside the pool (a sender's thread, the page's blocking tasks),
+        // `scope` runs its body on a pool thread and waits for it.
+        rayon::scope(|_| decode())
     }
 }
 

@@ -12,27 +12,34 @@ use axum::response::{IntoResponse, Response};
 use rosc::{OscMessage, OscType};
 use serde_json::{Value, json};
 
-use super::{Client, Shared, blocking, refuse, status};
+use super::{Client, Connection, Shared, blocking, refuse, status};
 use crate::osc::Peer;
 use crate::osc::args::Request;
 
 /// Every change the engine pushes to tablets, as server-sent events: one event per push,
 /// its data the messages as `[{"address": ..., "args": [...]}]` (`[]` when the page fell
-/// behind or the change pushes nothing to tablets: read `/state.json` again).
-pub(super) async fn events(State(sh): State<Arc<Shared>>) -> Response {
+/// behind or the change pushes nothing to tablets: read `/state.json` again). The
+/// connection counts as a stream while it runs: its host's fifth closes its oldest
+/// (`super::STREAMS_PER_HOST`; the browser opens a closed one again).
+pub(super) async fn events(
+    State(sh): State<Arc<Shared>>,
+    Extension(Connection(slot)): Extension<Connection>,
+) -> Response {
     let changes = sh.engine.changes();
-    let stream = futures_util::stream::unfold(changes, |mut rx| async move {
-        use tokio::sync::broadcast::error::RecvError;
-        let data = match rx.recv().await {
-            Ok(msgs) => Value::Array(msgs.iter().map(message_json).collect()),
-            Err(RecvError::Lagged(_)) => json!([]),
-            Err(RecvError::Closed) => return None,
-        };
-        Some((
-            Ok::<_, Infallible>(Event::default().data(data.to_string())),
-            rx,
-        ))
-    });
+    let streaming = slot.stream(std::time::Instant::now());
+    let stream =
+        futures_util::stream::unfold((changes, streaming), |(mut rx, streaming)| async move {
+            use tokio::sync::broadcast::error::RecvError;
+            let data = match rx.recv().await {
+                Ok(msgs) => Value::Array(msgs.iter().map(message_json).collect()),
+                Err(RecvError::Lagged(_)) => json!([]),
+                Err(RecvError::Closed) => return None,
+            };
+            Some((
+                Ok::<_, Infallible>(Event::default().data(data.to_string())),
+                (rx, streaming),
+            ))
+        });
     Sse::new(stream)
         .keep_alive(KeepAlive::default())
         .into_response()

@@ -10,8 +10,11 @@
 //! their caches); `upload` (the references folder: list and upload); `bridge` (`POST /osc`
 //! and the event stream).
 //!
-//! Bounded: 32 connections, 10 s for a request head of at most 16 KiB, 4 KiB of command
-//! body, 32 MiB of upload, 60 s per request (the event stream excepted).
+//! Bounded: 32 connections, shared out by host (`crate::slots`: at most 8 from one host,
+//! every loopback address counting as one, of which at most 4 event streams; when all are
+//! taken, a newcomer takes the slot of the oldest idle connection, or else the oldest event
+//! stream, of the host with the most), 10 s for a request head of at most 16 KiB, 4 KiB of
+//! command body, 32 MiB of upload, 60 s per request (the event stream excepted).
 
 mod access;
 mod bridge;
@@ -19,7 +22,7 @@ mod pictures;
 mod upload;
 mod view;
 
-use std::net::SocketAddr;
+use std::net::{IpAddr, Ipv4Addr, SocketAddr};
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -31,11 +34,11 @@ use axum::response::{IntoResponse, Response};
 use axum::routing::{get, post, put};
 use serde_json::json;
 use tokio::net::TcpListener;
-use tokio::sync::Semaphore;
 
 use crate::cmd::Runner;
 use crate::config::permits;
 use crate::engine::{Engine, RefusalKind};
+use crate::slots::{self, Slot, Slots};
 
 /// Largest request head (request line and headers); hyper answers 431 beyond it.
 const MAX_HEAD: usize = 16 * 1024;
@@ -45,8 +48,12 @@ const MAX_COMMAND: usize = 4 * 1024;
 const HEAD_TIMEOUT: Duration = Duration::from_secs(10);
 /// Time a request has to be answered (the body read included); not the event stream.
 const REQUEST_TIMEOUT: Duration = Duration::from_secs(60);
-/// Connections served at once; more are closed at once.
+/// Connections served at once, all hosts together.
 const MAX_CONNECTIONS: usize = 32;
+/// Connections one host may have open (a browser opens up to 6).
+const PER_HOST: usize = 8;
+/// Event streams one host may have open (a page each); a further one closes its oldest.
+const STREAMS_PER_HOST: usize = 4;
 
 const PAGE: &str = include_str!("page.html");
 
@@ -111,6 +118,22 @@ struct Shared {
 #[derive(Clone, Copy)]
 struct Client(SocketAddr);
 
+/// The connection's slot, put on each request by the accept loop: the event stream marks
+/// it a stream.
+#[derive(Clone)]
+struct Connection(Arc<Slot>);
+
+/// The host a client's connections count towards: its address, every loopback address
+/// being one host.
+fn host_of(ip: IpAddr) -> IpAddr {
+    let ip = ip.to_canonical();
+    if ip.is_loopback() {
+        IpAddr::V4(Ipv4Addr::LOCALHOST)
+    } else {
+        ip
+    }
+}
+
 fn router(shared: Arc<Shared>) -> Router {
     Router::new()
         .route("/", get(|| async { page() }))
@@ -147,11 +170,16 @@ fn router(shared: Arc<Shared>) -> Router {
 
 /// Takes connections from senders `osc.allow` permits (as the running config says now).
 async fn accept(listener: TcpListener, engine: Arc<Engine>, app: Router) {
-    let slots = Arc::new(Semaphore::new(MAX_CONNECTIONS));
+    let slots = Slots::new(slots::Limits {
+        total: MAX_CONNECTIONS,
+        per_host: PER_HOST,
+        streams_per_host: STREAMS_PER_HOST,
+    });
     // Refusals are logged at most every 10 s, with the count left out: a flood of
     // connections from outside must not flood the journal.
     let mut refused = visobjd_throttle::Throttle::default();
     let mut busy = visobjd_throttle::Throttle::default();
+    let mut made_room = visobjd_throttle::Throttle::default();
     loop {
         let (stream, from) = match listener.accept().await {
             Ok(c) => c,
@@ -167,27 +195,59 @@ async fn accept(listener: TcpListener, engine: Arc<Engine>, app: Router) {
             }
             continue;
         }
-        let Ok(slot) = Arc::clone(&slots).try_acquire_owned() else {
-            if let Some(suppressed) = busy.allow(std::time::Instant::now()) {
-                tracing::info!(
-                    suppressed,
-                    "http: {from} refused, {MAX_CONNECTIONS} connections busy"
-                );
+        let slot = match slots.admit(host_of(from.ip()), false, std::time::Instant::now()) {
+            Ok(admitted) => {
+                if let Some(gave) = admitted.made_room
+                    && let Some(suppressed) = made_room.allow(std::time::Instant::now())
+                {
+                    tracing::info!(
+                        suppressed,
+                        "http: closed the oldest idle connection or event stream of {gave} to make room for {from}"
+                    );
+                }
+                admitted.slot
             }
-            continue;
+            Err(why) => {
+                if let Some(suppressed) = busy.allow(std::time::Instant::now()) {
+                    tracing::info!(suppressed, "http: {from} refused: {why}");
+                }
+                continue;
+            }
         };
         let service = hyper_util::service::TowerToHyperService::new(
-            app.clone().layer(Extension(Client(from))),
+            app.clone()
+                .layer(Extension(Client(from)))
+                .layer(Extension(Connection(Arc::clone(&slot)))),
         );
+        // Each request marks the connection busy until it is answered: a connection in a
+        // request is never closed for another host's.
+        let counted = {
+            let slot = Arc::clone(&slot);
+            hyper::service::service_fn(move |req| {
+                let busy = slot.busy();
+                let answer = hyper::service::Service::call(&service, req);
+                async move {
+                    let answer = answer.await;
+                    drop(busy);
+                    answer
+                }
+            })
+        };
         tokio::spawn(async move {
             let served = hyper::server::conn::http1::Builder::new()
                 .timer(hyper_util::rt::TokioTimer::new())
                 .header_read_timeout(HEAD_TIMEOUT)
                 .max_buf_size(MAX_HEAD)
-                .serve_connection(hyper_util::rt::TokioIo::new(stream), service)
-                .await;
-            if let Err(e) = served {
-                tracing::debug!("http: {from}: {e}");
+                .serve_connection(hyper_util::rt::TokioIo::new(stream), counted);
+            tokio::select! {
+                served = served => {
+                    if let Err(e) = served {
+                        tracing::debug!("http: {from}: {e}");
+                    }
+                }
+                () = slot.closed() => {
+                    tracing::debug!("http: {from}: closed, its slot went to another connection");
+                }
             }
             drop(slot);
         });

@@ -298,7 +298,7 @@ async fn reference_picture(sh: &Shared, name: String) -> Response {
     }
     let engine = Arc::clone(&sh.engine);
     let decoded = blocking(move || {
-        engine.decode_reference(&path).map(|img| {
+        engine.decode_reference(&path, |img| {
             let (w, h) = img.dimensions();
             let img = if w > REFERENCE_WIDTH {
                 let h = (u64::from(h) * u64::from(REFERENCE_WIDTH) / u64::from(w)).max(1) as u32;

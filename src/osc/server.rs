@@ -2,13 +2,16 @@
 //! stream framing, and routing of replies back to whoever asked.
 //!
 //! Everything the commands see goes through [`Handler`]; everything between the socket and
-//! the handler lives here. Limits ([`Limits`]) keep one misbehaving client from costing
-//! others anything: a connection cap, an idle timeout, a frame size limit, a bounded queue
-//! for replies sent after the fact, and a bounded backlog per UDP sender, each sender (and
-//! each connection) handled in order on a blocking thread of its own.
+//! the handler lives here. Limits ([`Limits`]) keep one misbehaving host from costing
+//! others anything: connection slots shared out by host (`crate::slots`: a share per host,
+//! the oldest idle connection of the host with the most closed for a newcomer, the
+//! configured backups and peers always let in), an idle timeout, a frame size limit, a
+//! bounded queue for replies sent after the fact, and a bounded backlog per UDP sending
+//! host (all its ports together), each sender (address and port) and each connection
+//! handled in order on a blocking thread of its own.
 
 use std::collections::{HashMap, VecDeque};
-use std::net::SocketAddr;
+use std::net::{IpAddr, SocketAddr};
 use std::panic::AssertUnwindSafe;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, Weak};
@@ -28,6 +31,7 @@ use super::framing::{self, Decoder, Framing, StreamFrame};
 use super::packet::{self, Item, PacketError};
 use super::peers::{Route as PeerRoute, Routes};
 use crate::config::{Cidr, OscConfig};
+use crate::slots::{self, Slot, Slots};
 
 /// What answers OSC (in the daemon, `crate::cmd::Runner`).
 ///
@@ -56,8 +60,15 @@ where
 /// Robustness limits; [`Limits::default`] is what the daemon runs with (tests shrink them).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Limits {
-    /// TCP connections open at once; further ones are closed as soon as they are accepted.
+    /// TCP connections open at once, all hosts together. When all are taken, a newcomer
+    /// takes the slot of the oldest idle connection of the host with the most, if that host
+    /// has more than the newcomer's (for a configured backup or peer: any host but the
+    /// reserved ones); otherwise it is closed as soon as it is accepted.
     pub max_connections: usize,
+    /// TCP connections one host may have open (one more closes its own oldest idle one, or
+    /// is closed when none is idle), and UDP ports of one host served at once (datagrams
+    /// from a further port are dropped until one has caught up).
+    pub per_host: usize,
     /// A TCP connection that completes no frame for this long is closed.
     pub idle_timeout: Duration,
     /// The largest frame a TCP stream may carry; larger ones are skipped unbuffered and
@@ -66,11 +77,13 @@ pub struct Limits {
     /// Replies a connection may have queued ([`Peer::reply`]) before it is dropped as too
     /// slow.
     pub reply_queue: usize,
-    /// Bytes of datagrams one UDP sender may have waiting while its earlier ones are
-    /// handled; more are dropped (and counted), so a flood costs only its sender.
+    /// Bytes of datagrams one UDP sending host (all its ports together) may have waiting
+    /// while its earlier ones are handled; more are dropped (and counted), so a flood costs
+    /// only its host.
     pub udp_backlog: usize,
-    /// UDP senders whose datagrams are waiting or being handled at once; datagrams from
-    /// further senders are dropped until one has caught up.
+    /// UDP sending hosts (IP addresses: a host's ports are one) whose datagrams are waiting
+    /// or being handled at once; datagrams from further hosts are dropped until one has
+    /// caught up.
     pub udp_senders: usize,
 }
 
@@ -78,6 +91,7 @@ impl Default for Limits {
     fn default() -> Self {
         Limits {
             max_connections: 64,
+            per_host: 8,
             idle_timeout: Duration::from_secs(60),
             max_frame: framing::MAX_FRAME,
             reply_queue: 256,
@@ -278,11 +292,13 @@ pub struct Listeners {
     reply_port: u16,
 }
 
-/// Who may send (`osc.allow`) and where peers' replies go (`[[osc.peer]]`), checked
-/// together and replaced whole.
+/// Who may send (`osc.allow`), where peers' replies go (`[[osc.peer]]`) and whose TCP
+/// connections always get a slot (the peers and `osc.backups`), checked together and
+/// replaced whole.
 struct Allowed {
     allow: Vec<Cidr>,
     routes: Routes,
+    backups: Vec<IpAddr>,
 }
 
 impl Allowed {
@@ -293,10 +309,18 @@ impl Allowed {
             .map(|a| Cidr::parse(a).map_err(|e| format!("osc.allow: {e}")))
             .collect::<Result<Vec<_>, _>>()?;
         crate::config::validate_peers(&config.peer, &allow)?;
+        let backups = crate::config::validate_backups(&config.backups, &allow)?;
         Ok(Allowed {
             allow,
             routes: Routes::new(&config.peer),
+            backups,
         })
+    }
+
+    /// Whether `host` is one the config names (a peer, a backup): its connections are never
+    /// refused for want of a slot, nor closed for another host's.
+    fn reserved(&self, host: IpAddr) -> bool {
+        self.routes.get(host).is_some() || self.backups.contains(&host.to_canonical())
     }
 }
 
@@ -373,6 +397,12 @@ impl Server {
             reply_port,
         } = listeners;
         let shared = Arc::new(Shared {
+            slots: Slots::new(slots::Limits {
+                total: limits.max_connections,
+                per_host: limits.per_host,
+                // OSC has no streams.
+                streams_per_host: limits.per_host,
+            }),
             handler,
             rules: Rules(Arc::new(std::sync::RwLock::new(Arc::new(allowed)))),
             runtime: Handle::current(),
@@ -385,6 +415,7 @@ impl Server {
             refused_log: Mutex::default(),
             not_osc_log: Mutex::default(),
             busy_log: Mutex::default(),
+            room_log: Mutex::default(),
             peer_log: Mutex::default(),
         });
         let mut server = Server {
@@ -481,6 +512,8 @@ impl Drop for Server {
 
 /// State every listener task shares.
 struct Shared {
+    /// The TCP connections open, by host.
+    slots: Arc<Slots>,
     handler: Arc<dyn Handler>,
     rules: Rules,
     runtime: Handle,
@@ -493,6 +526,7 @@ struct Shared {
     refused_log: Mutex<Throttle>,
     not_osc_log: Mutex<Throttle>,
     busy_log: Mutex<Throttle>,
+    room_log: Mutex<Throttle>,
     peer_log: Mutex<Throttle>,
 }
 
@@ -629,9 +663,16 @@ impl Shared {
     }
 }
 
-/// Datagrams waiting per UDP sender, with their total size. A sender is in the map exactly
-/// while a worker task serves it.
-type Backlogs = Arc<Mutex<HashMap<SocketAddr, (VecDeque<Vec<u8>>, usize)>>>;
+/// Datagrams waiting per UDP sending host: per port, and their total size. A port is in
+/// the map exactly while a worker task serves it, a host while one of its ports is.
+type Backlogs = Arc<Mutex<HashMap<IpAddr, Waiting>>>;
+
+/// One UDP sending host's datagrams waiting, by port, and their total size.
+#[derive(Default)]
+struct Waiting {
+    ports: HashMap<SocketAddr, VecDeque<Vec<u8>>>,
+    bytes: usize,
+}
 
 /// Datagrams the kernel is asked to hold for the OSC socket. At 20,000 small datagrams a
 /// second (a flood, or every fader of several tablets at once) its default of 208 KiB is
@@ -666,8 +707,12 @@ fn bind_udp(addr: SocketAddr) -> std::io::Result<std::net::UdpSocket> {
     Ok(socket)
 }
 
-/// Receives datagrams and hands them to one worker per sender: a sender whose messages wait
-/// on the disk (saves) or flood in delays only itself, never a well-behaved client.
+/// Receives datagrams and hands them to one worker per sender (address and port): a sender
+/// whose messages wait on the disk (saves) or flood in delays only itself, never a
+/// well-behaved client. The limits count hosts (IP addresses), whatever ports they send
+/// from: at most [`Limits::udp_senders`] hosts at once, [`Limits::per_host`] ports of one
+/// host served at once, and [`Limits::udp_backlog`] bytes waiting for all of a host's ports
+/// together, so one host sending from many ports costs only itself.
 async fn udp_loop(sender: Sender, shared: Arc<Shared>) {
     let socket = sender.socket.clone();
     let mut buf = vec![0u8; 65536];
@@ -686,35 +731,43 @@ async fn udp_loop(sender: Sender, shared: Arc<Shared>) {
         if !shared.permits(from) {
             continue;
         }
+        let host = from.ip().to_canonical();
         let mut map = backlogs.lock().unwrap_or_else(|p| p.into_inner());
-        let at_cap = map.len() >= shared.limits.udp_senders;
-        let full = match map.get_mut(&from) {
-            Some((queue, bytes)) => {
-                let full = *bytes + n > shared.limits.udp_backlog;
-                if !full {
-                    queue.push_back(buf[..n].to_vec());
-                    *bytes += n;
+        let known = map.contains_key(&host);
+        let why = if !known && map.len() >= shared.limits.udp_senders {
+            Some("too many hosts are")
+        } else {
+            let waiting = map.entry(host).or_default();
+            let new_port = !waiting.ports.contains_key(&from);
+            if waiting.bytes + n > shared.limits.udp_backlog {
+                Some("its host is")
+            } else if new_port && waiting.ports.len() >= shared.limits.per_host {
+                Some("its host's other ports are")
+            } else {
+                waiting.bytes += n;
+                let queue = waiting.ports.entry(from).or_default();
+                queue.push_back(buf[..n].to_vec());
+                if new_port {
+                    tokio::spawn(serve_sender(
+                        from,
+                        backlogs.clone(),
+                        sender.clone(),
+                        shared.clone(),
+                    ));
                 }
-                full
-            }
-            None if at_cap => true,
-            None => {
-                map.insert(from, (VecDeque::from([buf[..n].to_vec()]), n));
-                tokio::spawn(serve_sender(
-                    from,
-                    backlogs.clone(),
-                    sender.clone(),
-                    shared.clone(),
-                ));
-                false
+                None
             }
         };
+        if why.is_some() && !known {
+            // Entered for this datagram alone: no port of it is served.
+            map.remove(&host);
+        }
         drop(map);
-        if full {
+        if let Some(why) = why {
             shared.dropped.fetch_add(1, Ordering::Relaxed);
             if let Some(n) = throttled(&shared.dropped_log) {
                 warn!(
-                    "OSC over UDP: dropped a datagram from {from}: it or too many senders are too far behind ({n} dropped since the last report)"
+                    "OSC over UDP: dropped a datagram from {from}: {why} too far behind ({n} dropped since the last report)"
                 );
             }
         }
@@ -724,6 +777,7 @@ async fn udp_loop(sender: Sender, shared: Arc<Shared>) {
 /// Serves one UDP sender's backlog in order until it is empty, handling on a blocking
 /// thread and answering from the server's socket.
 async fn serve_sender(from: SocketAddr, backlogs: Backlogs, sender: Sender, shared: Arc<Shared>) {
+    let host = from.ip().to_canonical();
     let peer = Peer {
         addr: from,
         reply_addr: shared.reply_addr(from),
@@ -732,15 +786,22 @@ async fn serve_sender(from: SocketAddr, backlogs: Backlogs, sender: Sender, shar
     loop {
         let batch: Vec<Vec<u8>> = {
             let mut map = backlogs.lock().unwrap_or_else(|p| p.into_inner());
-            match map.get_mut(&from) {
-                Some((queue, bytes)) if !queue.is_empty() => {
-                    *bytes = 0;
-                    queue.drain(..).collect()
+            let Some(waiting) = map.get_mut(&host) else {
+                return;
+            };
+            match waiting.ports.get_mut(&from) {
+                Some(queue) if !queue.is_empty() => {
+                    let batch: Vec<Vec<u8>> = queue.drain(..).collect();
+                    waiting.bytes -= batch.iter().map(Vec::len).sum::<usize>();
+                    batch
                 }
                 _ => {
                     // Empty: done. Checked and removed under the lock the receiver pushes
                     // under, so nothing is left behind.
-                    map.remove(&from);
+                    waiting.ports.remove(&from);
+                    if waiting.ports.is_empty() {
+                        map.remove(&host);
+                    }
                     return;
                 }
             }
@@ -797,17 +858,29 @@ async fn tcp_loop(listener: TcpListener, shared: Arc<Shared>) {
                     if !shared.permits(from) {
                         continue;
                     }
-                    if conns.len() >= shared.limits.max_connections {
-                        if let Some(n) = throttled(&shared.busy_log) {
-                            warn!(
-                                "OSC over TCP: {} connections already open; closed {from} ({n} closed since the last report)",
-                                conns.len()
-                            );
+                    let host = from.ip().to_canonical();
+                    let reserved = shared.rules.now().reserved(host);
+                    let admitted = match shared.slots.admit(host, reserved, Instant::now()) {
+                        Ok(a) => a,
+                        Err(why) => {
+                            if let Some(n) = throttled(&shared.busy_log) {
+                                warn!(
+                                    "OSC over TCP: closed {from}: {why} ({n} closed since the last report)"
+                                );
+                            }
+                            continue;
                         }
-                        continue;
+                    };
+                    if let Some(gave) = admitted.made_room
+                        && let Some(n) = throttled(&shared.room_log)
+                    {
+                        info!(
+                            "OSC over TCP: closed the oldest idle connection of {gave} to make room for {from} ({n} closed since the last report)"
+                        );
                     }
                     let queue = Queue::new(&shared.limits);
-                    conns.spawn(connection(stream, from, shared.clone(), queue, None));
+                    let slot = Some(admitted.slot);
+                    conns.spawn(connection(stream, from, shared.clone(), queue, None, slot));
                 }
                 Err(e) => {
                     if let Some(n) = throttled(&shared.busy_log) {
@@ -828,7 +901,7 @@ async fn outgoing(route: Arc<PeerRoute>, queue: Queue, framing: Framing, shared:
     match tokio::time::timeout(PEER_CONNECT, TcpStream::connect(to)).await {
         Ok(Ok(stream)) => {
             debug!("OSC over TCP: connected to peer `{}` at {to}", route.name);
-            connection(stream, to, shared, queue, Some(framing)).await;
+            connection(stream, to, shared, queue, Some(framing), None).await;
         }
         failed => {
             let why = match failed {
@@ -846,7 +919,8 @@ async fn outgoing(route: Arc<PeerRoute>, queue: Queue, framing: Framing, shared:
     }
 }
 
-/// Serves one TCP connection until it closes, idles out, or lets its reply queue overflow.
+/// Serves one TCP connection until it closes, idles out, lets its reply queue overflow, or
+/// gives its `slot` up to another host (`None`: visobjd opened it, it takes no slot).
 /// `framing` is the replies' when visobjd opened it (a peer's); otherwise the client's
 /// first byte decides. A `[[osc.peer]]` that takes TCP gets its pushes on it meanwhile.
 async fn connection(
@@ -855,6 +929,7 @@ async fn connection(
     shared: Arc<Shared>,
     queue: Queue,
     framing: Option<Framing>,
+    slot: Option<Arc<Slot>>,
 ) {
     debug!("OSC over TCP: {from} connected");
     // Small replies should not wait for Nagle; failing to set it only costs latency.
@@ -879,6 +954,7 @@ async fn connection(
         tokio::select! {
             biased;
             () = kill.notified() => break "its reply queue overflowed (it does not read)".to_string(),
+            () = given_up(slot.as_deref()) => break "its slot went to another host's connection (it was the oldest idle one)".to_string(),
             Some(bytes) = queued.recv() => {
                 if let Err(e) = write(&mut wr, &bytes, deadline).await {
                     break e;
@@ -916,6 +992,8 @@ async fn connection(
                     continue;
                 }
                 deadline = tokio::time::Instant::now() + limits.idle_timeout;
+                // In a request until its replies are written: never closed for another.
+                let _busy = slot.as_ref().map(Slot::busy);
                 let peer = Peer {
                     addr: from,
                     reply_addr: shared.reply_addr(from),
@@ -962,6 +1040,14 @@ async fn connection(
         route.detach(link);
     }
     debug!("OSC over TCP: {from} disconnected: {why}");
+}
+
+/// Resolves when `slot` was given to another connection; never without one.
+async fn given_up(slot: Option<&Slot>) {
+    match slot {
+        Some(s) => s.closed().await,
+        None => std::future::pending().await,
+    }
 }
 
 /// Writes all of `bytes`, giving up at the connection's idle deadline (a client that never

@@ -292,3 +292,123 @@ fn hostile_references_are_refused_and_a_bomb_does_not_stall_osc() {
     d.refused("/vo/objective/add", vec![string("warm.png")]);
     still_running(&mut d, from, "while hostile references were read");
 }
+
+/// Each thread of `pid`: its name, CPU time so far (clock ticks) and nice value.
+fn threads(pid: u32) -> std::collections::HashMap<u32, (String, u64, i64)> {
+    let mut out = std::collections::HashMap::new();
+    let Ok(tasks) = std::fs::read_dir(format!("/proc/{pid}/task")) else {
+        return out;
+    };
+    for task in tasks.flatten() {
+        let Ok(stat) = std::fs::read_to_string(task.path().join("stat")) else {
+            continue;
+        };
+        // "tid (name) state ...": the name may hold spaces and parentheses.
+        let (Some(open), Some(close)) = (stat.find('('), stat.rfind(')')) else {
+            continue;
+        };
+        let rest: Vec<&str> = stat[close + 1..].split_whitespace().collect();
+        let field = |i: usize| rest.get(i).and_then(|v| v.parse::<i64>().ok()).unwrap_or(0);
+        let tid = stat[..open].trim().parse().unwrap_or(0);
+        // After the name: state (field 3), ..., utime (14), stime (15), ..., nice (19).
+        let cpu = (field(11) + field(12)) as u64;
+        out.insert(tid, (stat[open + 1..close].to_string(), cpu, field(16)));
+    }
+    out
+}
+
+/// The thread of `pid` that took the most CPU while `work` ran: its name and nice value.
+fn busiest_during(pid: u32, work: impl FnOnce()) -> (String, i64, u64) {
+    let before = threads(pid);
+    work();
+    let after = threads(pid);
+    after
+        .into_iter()
+        .map(|(tid, (name, cpu, nice))| {
+            let used = cpu - before.get(&tid).map_or(0, |b| b.1.min(cpu));
+            (name, nice, used)
+        })
+        .max_by_key(|t| t.2)
+        .expect("the daemon has threads")
+}
+
+/// The daemon's peak resident memory (VmHWM), in KiB.
+fn peak_kib(pid: u32) -> u64 {
+    std::fs::read_to_string(format!("/proc/{pid}/status"))
+        .expect("/proc/PID/status")
+        .lines()
+        .find_map(|l| l.strip_prefix("VmHWM:"))
+        .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
+        .expect("a VmHWM line")
+}
+
+#[test]
+fn a_big_reference_decodes_within_its_bound_below_the_clock() {
+    let (mut d, addr) = common::http::start("hostile-decode");
+    for proto in PROTOS {
+        for u in UNIVERSES {
+            d.wire.wait(proto, u, "a first frame", |_| true);
+        }
+    }
+    let from = Instant::now();
+    let refs = d.refs();
+    // 64 megapixels of 16-bit RGBA: 512 MB at its own depth, a few MB on disk.
+    visobjd_testkit::png16(&refs.join("big16.png"), 8000, 8000);
+    let big = std::fs::read(refs.join("big16.png")).expect("read");
+    // A progressive JPEG of 49 megapixels keeps every coefficient while it decodes.
+    visobjd_testkit::progressive_jpeg_claiming(&refs.join("huge.jpg"), 7000, 7000);
+    let huge = std::fs::read(refs.join("huge.jpg")).expect("read");
+    let before_kib = d.rss_kib();
+
+    // Over the bound: refused from its header, the sentence naming the file and the limit.
+    let e = d.refused("/vo/objective/add", vec![string("huge.jpg")]);
+    assert!(
+        e.starts_with(
+            "huge.jpg would take 427 MiB to decode (a 7000x7000 progressive JPEG), over the 256 MiB"
+        ),
+        "{e}"
+    );
+    let r = common::http::send(addr, "PUT", "/references/huge2.jpg", &[], &huge);
+    assert_eq!(r.status, 400);
+    let e = r.json()["error"].as_str().unwrap_or_default().to_string();
+    assert!(
+        e.starts_with("upload `huge2.jpg`: would take 427 MiB") && e.contains("over the 256 MiB"),
+        "{e}"
+    );
+    assert!(!refs.join("huge2.jpg").exists());
+
+    // Within: decoded and analysed on a compute thread, niced below the clock.
+    let pid = d.pid();
+    let mut id = 0;
+    let (name, nice, ticks) = busiest_during(pid, || id = d.add_objective("big16.png", "both"));
+    assert!(id > 0);
+    println!("the add: {ticks} ticks on `{name}` at nice {nice}");
+    assert!(
+        name.starts_with("compute-") && nice == 10,
+        "the decode ran on `{name}` at nice {nice} ({ticks} ticks)"
+    );
+    // Five uploads of it, each checked by a whole decode, the same way.
+    for i in 0..5 {
+        let mut status = 0;
+        let (name, nice, ticks) = busiest_during(pid, || {
+            let path = format!("/references/copy{i}.png");
+            status = common::http::send(addr, "PUT", &path, &[], &big).status;
+        });
+        assert_eq!(status, 201, "upload {i}");
+        println!("upload {i}: {ticks} ticks on `{name}` at nice {nice}");
+        assert!(
+            name.starts_with("compute-") && nice == 10,
+            "upload {i} was decoded on `{name}` at nice {nice} ({ticks} ticks)"
+        );
+    }
+    // The most the daemon ever held: its size before plus one bounded decode (the 8-bit
+    // image, 183 MiB, and the analysis's 24 MB), never the 16-bit image's 512 MB.
+    let grew = peak_kib(pid).saturating_sub(before_kib);
+    println!("the daemon's peak grew by {} MiB", grew / 1024);
+    assert!(
+        grew <= 256 * 1024,
+        "the daemon's peak grew by {} MiB",
+        grew / 1024
+    );
+    still_running(&mut d, from, "while big references were decoded");
+}

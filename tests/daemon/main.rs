@@ -28,6 +28,7 @@ mod daemon_ma3;
 mod daemon_objectives;
 mod daemon_peers;
 mod daemon_reload;
+mod daemon_slots;
 mod daemon_start;
 mod eos;
 mod osc_transport;

@@ -91,6 +91,7 @@ fn loopback() -> OscConfig {
         reply_port: 0,
         allow: vec![],
         peer: vec![],
+        backups: vec![],
     }
 }
 
@@ -141,7 +142,12 @@ fn bundle(content: Vec<OscPacket>) -> OscPacket {
 }
 
 fn udp_client() -> UdpSocket {
-    let s = UdpSocket::bind("127.0.0.1:0").unwrap();
+    udp_client_from("127.0.0.1")
+}
+
+/// A UDP client on `ip` (any loopback address: another host to the server).
+fn udp_client_from(ip: &str) -> UdpSocket {
+    let s = UdpSocket::bind((ip, 0)).unwrap();
     s.set_read_timeout(Some(PATIENCE)).unwrap();
     s
 }
@@ -218,7 +224,7 @@ fn too_deep_bundles_get_an_error_and_garbage_nothing() {
 }
 
 #[test]
-fn a_slow_sender_delays_only_itself_and_its_backlog_is_bounded() {
+fn a_slow_sender_delays_only_its_host_and_its_backlog_is_bounded() {
     let h = serve_with(
         loopback(),
         Limits {
@@ -227,7 +233,7 @@ fn a_slow_sender_delays_only_itself_and_its_backlog_is_bounded() {
         },
     );
     let slow = udp_client();
-    let quick = udp_client();
+    let quick = udp_client_from("127.0.0.2");
     slow.send_to(&encode(&OscPacket::Message(msg("/slow", vec![]))), h.udp())
         .unwrap();
     // Its backlog (200 bytes) holds a few messages; the rest are dropped.
@@ -252,6 +258,73 @@ fn a_slow_sender_delays_only_itself_and_its_backlog_is_bounded() {
     // Nothing more: the next reply is that of a fence sent now (the backlog is empty).
     slow.send_to(&encode(&echo(1000)), h.udp()).unwrap();
     assert_eq!(ints(&recv(&slow)), [1000]);
+}
+
+#[test]
+fn one_hosts_ports_take_one_senders_place_and_share_its_budget() {
+    // Places for three sending hosts, four ports of one host served at once, 4 KiB
+    // waiting per host.
+    let h = serve_with(
+        loopback(),
+        Limits {
+            udp_senders: 3,
+            per_host: 4,
+            udp_backlog: 4096,
+            ..Limits::default()
+        },
+    );
+    let slow = || encode(&OscPacket::Message(msg("/slow", vec![])));
+    // One host sends from four ports, each message waiting on its handler: counted by
+    // port, they would take every place and lose one.
+    let ports: Vec<UdpSocket> = (0..4).map(|_| udp_client()).collect();
+    for p in &ports {
+        p.send_to(&slow(), h.udp()).unwrap();
+    }
+    std::thread::sleep(Duration::from_millis(50));
+    // A fifth port of that host waits for one of the four: its datagram is dropped.
+    let fifth = udp_client();
+    fifth.send_to(&encode(&echo(5)), h.udp()).unwrap();
+    // The other hosts are answered while the four wait.
+    let start = Instant::now();
+    for other in ["127.0.0.2", "127.0.0.3"] {
+        let c = udp_client_from(other);
+        c.send_to(&encode(&echo(7)), h.udp()).unwrap();
+        assert_eq!(ints(&recv(&c)), [7], "{other} was answered");
+    }
+    assert!(
+        start.elapsed() < Duration::from_millis(250),
+        "{:?}",
+        start.elapsed()
+    );
+    for p in &ports {
+        assert_eq!(recv(p).addr, "/slow");
+    }
+    nothing_arrives(&fifth);
+    assert_eq!(h.server.dropped(), 1);
+    // Its ports share one backlog: of 8 KiB of echoes sent from the four while they wait,
+    // at most 4 KiB are kept, whichever ports they came from.
+    for p in &ports {
+        p.send_to(&slow(), h.udp()).unwrap();
+    }
+    std::thread::sleep(Duration::from_millis(50));
+    let size = encode(&echo(0)).len();
+    let sent = 2 * 4096 / size;
+    for i in 0..sent {
+        ports[i % 4]
+            .send_to(&encode(&echo(i as i32)), h.udp())
+            .unwrap();
+    }
+    let mut kept = 0;
+    for p in &ports {
+        assert_eq!(recv(p).addr, "/slow");
+        p.set_read_timeout(Some(QUIET)).unwrap();
+        let mut buf = [0u8; 1024];
+        while p.recv(&mut buf).is_ok() {
+            kept += 1;
+        }
+    }
+    assert_eq!(kept, sent - (h.server.dropped() as usize - 1));
+    assert!(kept > 0 && kept * size <= 4096, "{kept} of {sent} kept");
 }
 
 #[test]

@@ -1,6 +1,8 @@
 //! Load against the real daemon: a UDP flood of mixed messages (faders, status, unknown
-//! addresses, broken and non-OSC packets) at a fixed rate, plus TCP clients that idle,
-//! dribble one byte a second, or ping, while a well-behaved UDP client pings every 10 ms.
+//! addresses, broken and non-OSC packets) at a fixed rate from one host (127.0.0.2), plus
+//! TCP clients that idle, dribble one byte a second, or ping (from seven more hosts, within
+//! each host's 8 connections), while a well-behaved UDP client on 127.0.0.1 pings every
+//! 10 ms.
 //! DMX must keep its rate with no gap over two frame periods, the pings must be answered,
 //! and memory must stay bounded (VmRSS before and after).
 //!
@@ -16,7 +18,7 @@ use std::net::{SocketAddr, TcpStream, UdpSocket};
 use std::time::{Duration, Instant};
 
 use crate::common;
-use crate::common::daemon::{Daemon, GAP, Osc, PROTOS, UNIVERSES, int, msg, string};
+use crate::common::daemon::{Daemon, GAP, Osc, PROTOS, UNIVERSES, connect_from, int, msg, string};
 
 /// What one load run measured.
 #[derive(Debug)]
@@ -92,9 +94,11 @@ fn load(name: &str, flood: Flood, secs: u64, rate: u64, tcp: usize) -> Report {
     let rss_before_kib = d.rss_kib();
     let run = Duration::from_secs(secs);
 
+    // At most 8 a host (the daemon's share for one host), on hosts of their own.
     let mut clients: Vec<(usize, TcpStream)> = (0..tcp)
         .map(|i| {
-            let s = TcpStream::connect(to_daemon).expect("TCP connect");
+            let host = std::net::IpAddr::from([127, 0, 1, 1 + (i / 8) as u8]);
+            let s = connect_from(host, to_daemon).expect("TCP connect");
             s.set_nonblocking(true).expect("nonblocking");
             (i % 3, s)
         })
@@ -108,7 +112,8 @@ fn load(name: &str, flood: Flood, secs: u64, rate: u64, tcp: usize) -> Report {
 
     let start = Instant::now();
     let flood = std::thread::spawn(move || {
-        let s = UdpSocket::bind("127.0.0.1:0").expect("bind");
+        // Another host than the pinger's: a host's ports share one backlog.
+        let s = UdpSocket::bind("127.0.0.2:0").expect("bind");
         let packets = flood_packets(flood);
         let per_ms = rate / 1000;
         let mut sent = 0u64;

@@ -6,6 +6,7 @@
 //! nothing here does network I/O, so a generate is reproducible from its seed.
 
 pub mod constrain;
+pub mod decode;
 pub mod gallery;
 pub mod objective;
 pub mod sampler;

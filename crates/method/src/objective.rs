@@ -2,14 +2,15 @@
 //!
 //! An objective is the image's intensity model (mean L*, key L*, fraction of bright pixels)
 //! and/or its colour palette, aimed at a region of the stage. Analysis is pure; only
-//! [`decode_reference`] touches the file system.
+//! [`decode_reference`] touches the file system (its decoding, within a memory bound, is
+//! `crate::decode`).
 
 use std::ops::Range;
-use std::path::Path;
 
 use rand::{Rng, RngExt, SeedableRng};
 use serde::{Deserialize, Serialize};
 
+pub use crate::decode::{DECODE_LIMIT, decode_reference, decode_reference_bytes};
 use visobjd_compositor::color::{delta_e, linear_to_lab, srgb8_to_linear_table};
 use visobjd_scene::srgb::linear_to_srgb;
 
@@ -195,68 +196,20 @@ pub struct Objective {
     pub analysis: Analysis,
 }
 
-/// Decodes a reference image (PNG, JPEG) to 8-bit sRGB, refusing non-images and images
-/// over [`MAX_REFERENCE_PIXELS`] before allocating them.
-pub fn decode_reference(path: &Path) -> Result<image::RgbImage, String> {
-    decode_with(|| image::ImageReader::open(path).map_err(|e| format!("cannot open it: {e}")))
-}
-
-/// [`decode_reference`] of a file's bytes already in memory: the same checks and limits,
-/// without the file system (the fuzz target drives this).
-pub fn decode_reference_bytes(bytes: &[u8]) -> Result<image::RgbImage, String> {
-    decode_with(|| Ok(image::ImageReader::new(std::io::Cursor::new(bytes))))
-}
-
-/// Reads the header first (refusing what is too large before any pixel is decoded), then
-/// decodes through a second reader from `open`.
-fn decode_with<R: std::io::BufRead + std::io::Seek>(
-    open: impl Fn() -> Result<image::ImageReader<R>, String>,
-) -> Result<image::RgbImage, String> {
-    let reader = open()?
-        .with_guessed_format()
-        .map_err(|e| format!("cannot read it: {e}"))?;
-    if reader.format().is_none() {
-        return Err("is not an image (PNG or JPEG expected)".into());
-    }
-    let (w, h) = reader
-        .into_dimensions()
-        .map_err(|e| format!("is not a readable image: {e}"))?;
-    if u64::from(w) * u64::from(h) > MAX_REFERENCE_PIXELS {
-        return Err(format!(
-            "is {w}x{h}, over the {} megapixel limit",
-            MAX_REFERENCE_PIXELS / 1_000_000
-        ));
-    }
-    if w == 0 || h == 0 {
-        return Err("has no pixels".into());
-    }
-    let mut reader = open()?
-        .with_guessed_format()
-        .map_err(|e| format!("cannot read it: {e}"))?;
-    let mut limits = image::Limits::default();
-    limits.max_image_width = Some(w);
-    limits.max_image_height = Some(h);
-    limits.max_alloc = Some(MAX_REFERENCE_PIXELS * 16);
-    reader.limits(limits);
-    let img = std::panic::catch_unwind(std::panic::AssertUnwindSafe(move || reader.decode()))
-        .map_err(|_| "is corrupt (the decoder gave up)".to_string())?
-        .map_err(|e| format!("is not a readable image: {e}"))?;
-    Ok(img.to_rgb8())
-}
-
 /// Crops to `crop`, then shrinks so the longest side is at most [`ANALYSIS_SIDE`], and
-/// returns the pixels in linear RGB.
+/// returns the pixels in linear RGB. The crop is a view: a big reference is read where it
+/// lies, never copied whole.
 fn analysis_pixels(img: &image::RgbImage, crop: Region) -> Vec<[f32; 3]> {
     let (x0, y0, x1, y1) = crop.pixel_bounds(img.width(), img.height());
-    let view = image::imageops::crop_imm(img, x0, y0, x1 - x0, y1 - y0).to_image();
-    let (w, h) = view.dimensions();
+    let view = image::imageops::crop_imm(img, x0, y0, x1 - x0, y1 - y0);
+    let (w, h) = (x1 - x0, y1 - y0);
     let small = if w.max(h) > ANALYSIS_SIDE {
         let scale = f64::from(ANALYSIS_SIDE) / f64::from(w.max(h));
         let nw = ((f64::from(w) * scale).round() as u32).max(1);
         let nh = ((f64::from(h) * scale).round() as u32).max(1);
-        image::imageops::resize(&view, nw, nh, image::imageops::FilterType::Triangle)
+        image::imageops::resize(&*view, nw, nh, image::imageops::FilterType::Triangle)
     } else {
-        view
+        view.to_image()
     };
     let lut = srgb8_to_linear_table();
     small

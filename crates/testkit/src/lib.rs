@@ -153,6 +153,45 @@ pub fn png_bomb(path: &Path, w: u32, h: u32) {
     .expect("write bomb");
 }
 
+/// A `w` x `h` 16-bit RGBA PNG, a smooth gradient (red along x, green along y: 8 x the
+/// coordinate, so pixel (1000, 2000) reads 8-bit (31, 62, 78) with blue 20000 and alpha
+/// opaque), written row by row: a few MB on disk that decode to 8 bytes a pixel at their own
+/// depth, and never held whole by the test.
+pub fn png16(path: &Path, w: u32, h: u32) {
+    let file = std::io::BufWriter::new(std::fs::File::create(path).expect("create PNG"));
+    let mut encoder = png::Encoder::new(file, w, h);
+    encoder.set_color(png::ColorType::Rgba);
+    encoder.set_depth(png::BitDepth::Sixteen);
+    encoder.set_compression(png::Compression::Fast);
+    let mut writer = encoder.write_header().expect("PNG header");
+    let mut stream = writer.stream_writer().expect("PNG stream");
+    let mut row = Vec::with_capacity(w as usize * 8);
+    for y in 0..h {
+        row.clear();
+        for x in 0..w {
+            for v in [x * 8, y * 8, 20_000, 65_535] {
+                row.extend((v as u16).to_be_bytes());
+            }
+        }
+        std::io::Write::write_all(&mut stream, &row).expect("PNG row");
+    }
+    stream.finish().expect("PNG end");
+}
+
+/// A small progressive JPEG (crates/method/tests/fixtures/progressive.jpg) whose frame
+/// header claims `w` x `h`: read from its header as that size, so refused before decoding
+/// when too large.
+pub fn progressive_jpeg_claiming(path: &Path, w: u16, h: u16) {
+    let mut jpeg = include_bytes!("../../method/tests/fixtures/progressive.jpg").to_vec();
+    let at = jpeg
+        .windows(2)
+        .position(|m| m == [0xFF, 0xC2])
+        .expect("a progressive frame header");
+    jpeg[at + 5..at + 7].copy_from_slice(&h.to_be_bytes());
+    jpeg[at + 7..at + 9].copy_from_slice(&w.to_be_bytes());
+    std::fs::write(path, jpeg).expect("write JPEG");
+}
+
 /// A reference image from a function of pixel position.
 pub fn write_png(path: &Path, w: u32, h: u32, f: impl Fn(u32, u32) -> [u8; 3]) {
     let img = image::RgbImage::from_fn(w, h, |x, y| image::Rgb(f(x, y)));
