@@ -507,6 +507,12 @@ fn the_page_shows_what_a_generate_notes() {
         "showed the daemon's status",
         |v| v.as_str().is_some_and(|s| s.contains("no gallery yet")),
     );
+    // The note is pushed: the page must be listening before the generate is asked for.
+    page.wait(
+        "document.body.dataset.events ?? ''",
+        "opened its event stream",
+        |v| v.as_str() == Some("open"),
+    );
     assert_eq!(
         page.eval("document.getElementById('generate').click(); true"),
         true
