@@ -1,20 +1,7 @@
-//! What the exports to lighting desks (Eos, grandMA3) share: the `address` key of their
-//! config sections, and a UDP socket to send from.
+//! What the exports to lighting desks (Eos, grandMA3) share: a UDP socket to send from
+//! (their `address` keys are read by `crate::osc::address`).
 
 use std::net::{Ipv4Addr, Ipv6Addr, SocketAddr, UdpSocket};
-
-/// A desk's `address` key: None when empty (that export is off), Err naming `key` when
-/// it is not an address:port such as `example`.
-pub fn address(key: &str, value: &str, example: &str) -> Result<Option<SocketAddr>, String> {
-    if value.trim().is_empty() {
-        return Ok(None);
-    }
-    value
-        .trim()
-        .parse()
-        .map(Some)
-        .map_err(|_| format!("{key} `{value}` is not an address:port such as {example}"))
-}
 
 /// A socket of the right family to send to `to` from any local port.
 pub fn udp_socket(to: SocketAddr) -> Result<UdpSocket, String> {

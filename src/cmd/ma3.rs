@@ -6,6 +6,7 @@ use rosc::{OscMessage, OscType};
 
 use super::{Context, int_arg};
 use crate::engine::Refusal;
+use crate::eos::commands::trimmed;
 use crate::ma3::commands::Target;
 use crate::osc::args::{self, Request};
 
@@ -21,10 +22,11 @@ impl Cmd {
             None => Ok(None),
         };
         Ok(Some(if req.matches("/vo/ma3/preset").is_some() {
-            // Text keeps `21.10` as written; a number is read as it prints (21.1).
+            // Text keeps `21.10` as written; a number is read to three decimals (a
+            // float's 21.1 is 21.100000381...), so 21.10 as a number is 21.1.
             let preset = match req.required(0, "preset (POOL.NUMBER)")? {
                 OscType::String(s) => s.clone(),
-                a => args::number(a, "preset (POOL.NUMBER)")?.to_string(),
+                a => trimmed(args::number(a, "preset (POOL.NUMBER)")?, 3),
             };
             Cmd {
                 target: Target::preset(&preset)?,

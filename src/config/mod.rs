@@ -1,7 +1,7 @@
 //! `config/visobjd.toml` (docs/config.md): every key has a default, unknown keys are an error
 //! naming the key and line, and relative paths are relative to the config file's folder.
 
-use std::net::{IpAddr, SocketAddr};
+use std::net::IpAddr;
 use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
@@ -267,11 +267,7 @@ impl Config {
             ("osc.tcp", &file.osc.tcp),
             ("http.listen", &file.http.listen),
         ] {
-            if !value.is_empty() && value.parse::<SocketAddr>().is_err() {
-                return Err(at(format!(
-                    "{key}: `{value}` is not an address:port such as 127.0.0.1:8000"
-                )));
-            }
+            crate::osc::address(key, value, "127.0.0.1:8000").map_err(at)?;
         }
         let allow = file
             .osc

@@ -83,7 +83,7 @@ impl EosConfig {
 
     /// The Eos console's address, None when export is off; Err names the bad value.
     pub fn target(&self) -> Result<Option<SocketAddr>, String> {
-        crate::desk::address("eos.address", &self.address, "10.101.0.5:8000")
+        crate::osc::address("eos.address", &self.address, "10.101.0.5:8000")
     }
 
     /// The OSC address every command line is sent to.

@@ -49,7 +49,7 @@ impl Ma3Config {
 
     /// The desk's address, None when the export is off; Err names the bad value.
     pub fn target(&self) -> Result<Option<SocketAddr>, String> {
-        crate::desk::address("ma3.address", &self.address, "10.101.0.8:8000")
+        crate::osc::address("ma3.address", &self.address, "10.101.0.8:8000")
     }
 
     /// The OSC address every command goes to.

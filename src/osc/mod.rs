@@ -16,6 +16,8 @@ pub mod server;
 
 pub use server::{Handler, Limits, Peer, Sender, Server, Transport};
 
+use std::net::SocketAddr;
+
 use rosc::{OscMessage, OscType};
 
 /// The address of every error answer.
@@ -31,4 +33,17 @@ pub fn error(addr: &str, sentence: &str) -> OscMessage {
             OscType::String(sentence.to_string()),
         ],
     }
+}
+
+/// A config key holding an address:port (a listener's, or a console's to send to): None
+/// when empty (off), Err naming `key` when it is not one such as `example`.
+pub fn address(key: &str, value: &str, example: &str) -> Result<Option<SocketAddr>, String> {
+    if value.trim().is_empty() {
+        return Ok(None);
+    }
+    value
+        .trim()
+        .parse()
+        .map(Some)
+        .map_err(|_| format!("{key} `{value}` is not an address:port such as {example}"))
 }

@@ -347,10 +347,10 @@ impl Listeners {
     /// key and address: "osc.udp 127.0.0.1:8000: address already in use".
     pub fn bind(config: &OscConfig) -> Result<Listeners, String> {
         let allowed = Allowed::of(config)?;
-        let udp = listen_addr("osc.udp", &config.udp)?
+        let udp = super::address("osc.udp", &config.udp, "127.0.0.1:8000")?
             .map(|addr| bind_udp(addr).map_err(|e| format!("osc.udp {addr}: {}", plain(&e))))
             .transpose()?;
-        let tcp = listen_addr("osc.tcp", &config.tcp)?
+        let tcp = super::address("osc.tcp", &config.tcp, "127.0.0.1:8000")?
             .map(|addr| {
                 std::net::TcpListener::bind(addr)
                     .and_then(|l| l.set_nonblocking(true).map(|()| l))
@@ -1106,18 +1106,6 @@ fn encode_datagram(msg: &OscMessage) -> Result<Vec<u8>, String> {
         bytes = encode(&cut)?;
     }
     Ok(bytes)
-}
-
-/// Parses a listen address from the config; "" is off.
-fn listen_addr(key: &str, value: &str) -> Result<Option<SocketAddr>, String> {
-    if value.trim().is_empty() {
-        return Ok(None);
-    }
-    value
-        .trim()
-        .parse()
-        .map(Some)
-        .map_err(|_| format!("{key} `{value}`: not an address:port such as 127.0.0.1:8000"))
 }
 
 /// An I/O error as a lowercase phrase without the OS error number.

@@ -143,10 +143,14 @@ fn a_preset_and_a_cue_reach_the_desk_as_ma3_commands_with_the_wire_values() {
     assert_eq!(state["errors"], serde_json::json!([]), "{state}");
     assert_eq!(state["cues"]["901/3"]["fade"], 2.5);
     assert_stored_matches_the_wire(&d, &state["cues"]["901/3"]["values"]);
+    let mut sent = sent + num(&r.args[1]) as usize;
 
+    // A float from a tablet is read to three decimals.
+    let r = d.ok("/vo/ma3/preset", vec![float(21.1)], "/vo/ma3/sent");
+    assert_eq!(text(&r.args[0]), "Preset 21.1");
+    sent += num(&r.args[1]) as usize;
     let why = d.refused("/vo/ma3/preset", vec![string("21")]);
     assert!(why.contains("POOL.NUMBER"), "{why}");
-    let sent = sent + num(&r.args[1]) as usize;
 
     // A light whose MA3 fixture ID is not its channel (`ma3_id`), after a reload; two
     // lights with one ID are refused.
