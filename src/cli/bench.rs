@@ -412,6 +412,7 @@ impl<'a> Compositor<'a> {
                     .map(|_| Level {
                         intensity: rng.random(),
                         color: [rng.random(), rng.random(), rng.random()],
+                        position: None,
                     })
                     .collect(),
             })

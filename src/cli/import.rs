@@ -315,6 +315,20 @@ fn merge(rig: &Rig, name: &str, old: Option<&SceneFile>, prune: bool) -> Merged 
         }
         // What capture made of the light's emitters holds while they are still the same.
         let kept = before.filter(|l| same_emitters(&l.emitter_basis, profile));
+        // A mover's positions hold while its fixture type can still be aimed; else its
+        // first position's image is its one basis.
+        let (basis, positions) = match before {
+            Some(l) if !l.positions.is_empty() && profile.is_moving() => {
+                (None, l.positions.clone())
+            }
+            Some(l) => (
+                l.basis
+                    .clone()
+                    .or_else(|| l.positions.first().map(|p| p.basis.clone())),
+                Vec::new(),
+            ),
+            None => (Some(basis_path(f.channel)), Vec::new()),
+        };
         lights.push(LightFile {
             channel: f.channel,
             name: Some(f.name.clone()).filter(|n| !n.is_empty()),
@@ -323,13 +337,14 @@ fn merge(rig: &Rig, name: &str, old: Option<&SceneFile>, prune: bool) -> Merged 
                 .clone()
                 .filter(|g| !g.is_empty())
                 .or_else(|| before.and_then(|l| l.group.clone())),
-            basis: before.map_or_else(|| basis_path(f.channel), |l| l.basis.clone()),
+            basis,
             profile: profile.name.clone(),
             universe: f.universe,
             address: f.address,
             emitter_basis: kept.map(|l| l.emitter_basis.clone()).unwrap_or_default(),
             emitter_measured: kept.map(|l| l.emitter_measured.clone()).unwrap_or_default(),
             ma3_id: before.and_then(|l| l.ma3_id),
+            positions,
         });
     }
     let imported = lights.len();

@@ -257,10 +257,12 @@ mod tests {
                 Level {
                     intensity: v,
                     color: [1.0; 3],
+                    position: None,
                 },
                 Level {
                     intensity: 1.0 - v,
                     color: [v, 0.25, 1.0 / 3.0],
+                    position: None,
                 },
             ],
         }

@@ -298,6 +298,7 @@ mod tests {
                 .map(|i| Level {
                     intensity: LONG[(i + k) % 3],
                     color: [LONG[(i + k + 1) % 3], LONG[(i + k + 2) % 3], LONG[k % 3]],
+                    position: None,
                 })
                 .collect(),
         }

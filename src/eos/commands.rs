@@ -85,6 +85,9 @@ fn parameter(slot: Slot) -> Option<&'static str> {
         Slot::Intensity | Slot::Intensity16 | Slot::Uv | Slot::Fixed(_) | Slot::Emitter(_) => {
             return None;
         }
+        // A mover's position goes as its focus palette, or as pan and tilt in degrees
+        // (docs/eos.md), not as a percentage of the slot.
+        Slot::Pan | Slot::Pan16 | Slot::Tilt | Slot::Tilt16 => return None,
     })
 }
 

@@ -85,6 +85,8 @@ fn attribute(slot: Slot) -> Option<&'static str> {
         Slot::Magenta => "ColorSub_M",
         Slot::Yellow => "ColorSub_Y",
         Slot::Uv | Slot::Fixed(_) | Slot::Emitter(_) => return None,
+        // A mover's position goes as its Position preset, not as a slot level.
+        Slot::Pan | Slot::Pan16 | Slot::Tilt | Slot::Tilt16 => return None,
     })
 }
 

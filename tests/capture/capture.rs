@@ -144,6 +144,7 @@ fn sent_colour_error(
     look.levels[l] = Level {
         intensity: 1.0,
         color: target,
+        position: None,
     };
     let patch = visobjd_dmx::Patch::new(scene);
     let bytes = patch.quantise(&patch.levels(&look, 1.0));

@@ -702,6 +702,7 @@ fn the_demo_rig_round_trips_through_mvr() {
                 .map(|i| Level {
                     intensity: ((i + k) % 5) as f32 / 4.0,
                     color: [1.0, ((i * 3 + k) % 7) as f32 / 6.0, (k % 2) as f32],
+                    position: None,
                 })
                 .collect(),
         };

@@ -24,6 +24,7 @@ fn a_44_light_look_arrives_as_exact_command_lines() {
             } else {
                 [1.0; 3]
             },
+            position: None,
         };
     }
     let lines = preset_commands(&scene, &look, 7);

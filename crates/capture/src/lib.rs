@@ -754,6 +754,7 @@ impl Session<'_> {
             look.levels[l] = Level {
                 intensity: level,
                 color: [1.0; 3],
+                position: None,
             };
         }
         for (l, lv) in look.levels.iter().enumerate() {
@@ -825,6 +826,7 @@ impl Session<'_> {
             look.levels[l] = Level {
                 intensity: rng.random_range(0.6f32..1.0),
                 color: SATURATED[rng.random_range(0..SATURATED.len())],
+                position: None,
             };
         }
         // The previews of the lit lights alone: the others' images may not exist yet.
@@ -974,6 +976,7 @@ const METERED: f64 = 0.3;
 const WHITE: Level = Level {
     intensity: 1.0,
     color: [1.0; 3],
+    position: None,
 };
 
 /// How many samples of `light - ambient` exceed one and a half times the largest

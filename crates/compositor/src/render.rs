@@ -1026,6 +1026,7 @@ mod tests {
                             ((k * 31 + l * 17) % 100) as f32 / 100.0
                         },
                         color: [0.9, ((k + l) % 5) as f32 / 5.0, 0.4],
+                        position: None,
                     })
                     .collect(),
             })

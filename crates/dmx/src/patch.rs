@@ -193,6 +193,7 @@ impl Patch {
             let flags = Level {
                 intensity: fold,
                 color,
+                position: None,
             }
             .multiplier()
             .map(unit);
@@ -380,6 +381,7 @@ impl Patch {
                 Level {
                     intensity: unit(intensity),
                     color: linear.map(|v| unit(linear_to_srgb(unit(v)))),
+                    position: None,
                 }
             })
             .collect();
@@ -457,7 +459,14 @@ mod tests {
     /// Every light at `intensity` with sRGB colour `color`.
     fn look(scene: &Scene, intensity: f32, color: [f32; 3]) -> Look {
         Look {
-            levels: vec![Level { intensity, color }; scene.lights.len()],
+            levels: vec![
+                Level {
+                    intensity,
+                    color,
+                    position: None
+                };
+                scene.lights.len()
+            ],
         }
     }
 
@@ -680,6 +689,7 @@ mod tests {
                     Level {
                         intensity: next(),
                         color,
+                        position: None,
                     }
                 })
                 .collect();
@@ -767,7 +777,11 @@ mod tests {
                     if round % 11 == 0 {
                         color = [0.0; 3];
                     }
-                    Level { intensity, color }
+                    Level {
+                        intensity,
+                        color,
+                        position: None,
+                    }
                 })
                 .collect();
             let sent = patch.quantise(&patch.unmastered(&Look { levels }));

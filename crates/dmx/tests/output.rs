@@ -49,7 +49,14 @@ address = 10
 
 fn look(intensity: f32, color: [f32; 3]) -> Look {
     Look {
-        levels: vec![Level { intensity, color }; 3],
+        levels: vec![
+            Level {
+                intensity,
+                color,
+                position: None
+            };
+            3
+        ],
     }
 }
 
@@ -726,7 +733,8 @@ fn a_rewire_moves_the_rig_without_a_gap_and_ends_only_the_streams_it_drops() {
         levels: vec![
             Level {
                 intensity: 1.0,
-                color: [1.0; 3]
+                color: [1.0; 3],
+                position: None
             };
             2
         ],

@@ -41,6 +41,7 @@ fn random_look(n: usize, rng: &mut Rng) -> Look {
             .map(|_| Level {
                 intensity: rng.random(),
                 color: [rng.random(), rng.random(), rng.random()],
+                position: None,
             })
             .collect(),
     }

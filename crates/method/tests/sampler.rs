@@ -189,6 +189,7 @@ fn groups_share_one_value_and_locked_lights_keep_the_base_exactly() {
         *l = Level {
             intensity: 0.1 + 0.07 * i as f32,
             color: [0.3, 0.6, 0.9],
+            position: None,
         };
     }
     let mut c = Constraints::none(&r);
@@ -461,6 +462,7 @@ fn varied_base(n: usize) -> Look {
             .map(|i| Level {
                 intensity: 0.05 + 0.9 * ((i * 37 % n) as f32 / n as f32),
                 color: [0.9, 0.2 + 0.5 * (i % 3) as f32 / 2.0, 0.1],
+                position: None,
             })
             .collect(),
     }

@@ -316,6 +316,8 @@ impl GdtfType {
             name: name.to_string(),
             channels,
             emitters,
+            pan_range: None,
+            tilt_range: None,
         })
         .map_err(|e| e.replace(&format!("profile `{name}`: "), ""))?;
         if !profile.has_intensity() && !profile.has_colour() {

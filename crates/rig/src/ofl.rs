@@ -190,6 +190,8 @@ impl OflType {
             name: name.to_string(),
             channels,
             emitters: Vec::new(),
+            pan_range: None,
+            tilt_range: None,
         })
         .map_err(|e| e.replace(&format!("profile `{name}`: "), ""))?;
         if !profile.has_intensity() && !profile.has_colour() {

@@ -100,8 +100,10 @@ pub struct LightFile {
     /// A declared group.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub group: Option<String>,
-    /// Basis image path, relative to the scene folder.
-    pub basis: String,
+    /// Basis image path, relative to the scene folder; a moving light gives one per
+    /// position in `[[light.position]]` instead.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub basis: Option<String>,
     /// Built-in or `[[profile]]` name.
     pub profile: String,
     /// sACN universe.
@@ -120,7 +122,34 @@ pub struct LightFile {
     /// The light's fixture ID on a grandMA3, when it is not its channel.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ma3_id: Option<u32>,
+    /// A moving light's positions (`[[light.position]]`), each a focus palette with its
+    /// pan, tilt and basis image.
+    #[serde(default, rename = "position", skip_serializing_if = "Vec::is_empty")]
+    pub positions: Vec<PositionFile>,
 }
+
+/// A `[[light.position]]` table: one focus palette of a moving light.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PositionFile {
+    /// The focus palette's number, shared by the lights that have it (Eos `FP n`,
+    /// grandMA3 `Preset 2.n`).
+    pub palette: u32,
+    /// Its label, the same on every light that names it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub name: Option<String>,
+    /// Degrees from the centre of the profile's pan range.
+    pub pan: f64,
+    /// Degrees from the centre of the profile's tilt range.
+    pub tilt: f64,
+    /// The stage lit by this light alone, at full, in this position.
+    pub basis: String,
+}
+
+/// Most positions one light may hold: bounds what a hostile scene makes the daemon load.
+pub const MAX_POSITIONS: usize = 100;
+/// Highest focus palette number (Eos and grandMA3 both number from 1).
+pub const MAX_PALETTE: u32 = 9999;
 
 /// One emitter's colour measured from its image: CIE 1931 xy and its output relative to
 /// the light's other emitters (the Y of CIE xyY).
@@ -196,6 +225,75 @@ pub struct Light {
     pub emitter_measured: Vec<[f64; 3]>,
     /// Its fixture ID on a grandMA3 (`ma3_id`, by default the channel), unique.
     pub ma3_id: u32,
+    /// A moving light's positions in scene.toml order (empty for a fixed light); its
+    /// `basis` is the first one's image, the position it takes in a look that names none.
+    pub positions: Vec<Position>,
+}
+
+impl Light {
+    /// Whether the light has positions to choose from.
+    pub fn is_moving(&self) -> bool {
+        !self.positions.is_empty()
+    }
+
+    /// The index in [`Light::positions`] of focus palette `palette`.
+    pub fn position_index(&self, palette: u32) -> Option<usize> {
+        self.positions.iter().position(|p| p.palette == palette)
+    }
+
+    /// The position `level` puts this light in: its palette if the light has it, else
+    /// its first (`None` for a fixed light).
+    pub fn position_of(&self, level: &look::Level) -> Option<&Position> {
+        level
+            .position
+            .and_then(|n| self.position_index(n))
+            .or((!self.positions.is_empty()).then_some(0))
+            .map(|i| &self.positions[i])
+    }
+
+    /// Its palette numbers, in its order, for "it has 1, 3, 5" messages.
+    pub fn palette_list(&self) -> String {
+        let n: Vec<String> = self
+            .positions
+            .iter()
+            .map(|p| p.palette.to_string())
+            .collect();
+        n.join(", ")
+    }
+}
+
+/// One position of a moving light.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Position {
+    /// The focus palette's number.
+    pub palette: u32,
+    /// Degrees from the centre of the pan range.
+    pub pan: f64,
+    /// Degrees from the centre of the tilt range.
+    pub tilt: f64,
+    /// The basis image, resolved against the scene folder.
+    pub basis: PathBuf,
+}
+
+/// A focus palette: a number and a label shared by every light that has it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Palette {
+    /// 1..=[`MAX_PALETTE`].
+    pub number: u32,
+    /// Its label, if any light names it.
+    pub name: Option<String>,
+    /// The lights that have it (indices into [`Scene::lights`]), ascending.
+    pub lights: Vec<usize>,
+}
+
+impl Palette {
+    /// `3 "DS centre"`, or `3` without a label.
+    pub fn describe(&self) -> String {
+        match &self.name {
+            Some(n) => format!("{} \"{n}\"", self.number),
+            None => self.number.to_string(),
+        }
+    }
 }
 
 /// A light group ("system"): sampling assigns one value per group by default.
@@ -243,6 +341,8 @@ pub struct Scene {
     pub groups: Vec<Group>,
     /// Profiles in use (built-in and custom).
     pub profiles: Vec<Profile>,
+    /// The focus palettes the moving lights hold, by number.
+    pub palettes: Vec<Palette>,
     /// Each group's index by its address form, lower case ([`Scene::group_index`]), as
     /// parsed.
     by_address: HashMap<String, usize>,
@@ -315,6 +415,7 @@ impl Scene {
         // (16,000 lights, each its own group, took seconds when these were scans).
         let mut profile_index: HashMap<&str, usize> = HashMap::new();
         let mut slots: BTreeMap<(u16, u16), u32> = BTreeMap::new();
+        let mut palettes: BTreeMap<u32, (Palette, u32)> = BTreeMap::new();
         for (i, l) in raw.iter().enumerate() {
             if l.channel == 0 {
                 return Err(invalid("light channel 0: channels start at 1".into()));
@@ -390,12 +491,56 @@ impl Scene {
                     groups.len() - 1
                 }
             };
-            let basis = safe_relative(&l.basis).ok_or_else(|| {
-                invalid(format!(
-                    "light {}: basis `{}` must be a relative path inside the scene folder",
-                    l.channel, l.basis
-                ))
-            })?;
+            let basis_path = |b: &str| {
+                safe_relative(b).map(|p| dir.join(p)).ok_or_else(|| {
+                    invalid(format!(
+                        "light {}: basis `{b}` must be a relative path inside the scene folder",
+                        l.channel
+                    ))
+                })
+            };
+            let positions = positions(l, &profiles[profile], &mut palettes)
+                .map_err(invalid)?
+                .into_iter()
+                .map(|p| {
+                    Ok(Position {
+                        palette: p.palette,
+                        pan: p.pan,
+                        tilt: p.tilt,
+                        basis: basis_path(&p.basis)?,
+                    })
+                })
+                .collect::<Result<Vec<Position>, SceneError>>()?;
+            let basis = match (&l.basis, positions.first()) {
+                (Some(b), None) => basis_path(b)?,
+                (None, Some(first)) => first.basis.clone(),
+                (Some(_), Some(_)) => {
+                    return Err(invalid(format!(
+                        "light {}: a moving light gives one basis image per [[light.position]], \
+                         not `basis`",
+                        l.channel
+                    )));
+                }
+                (None, None) => {
+                    return Err(invalid(format!(
+                        "light {}: no basis image: give `basis`, or [[light.position]] tables \
+                         for a moving light",
+                        l.channel
+                    )));
+                }
+            };
+            if !positions.is_empty() && !l.emitter_basis.is_empty() {
+                return Err(invalid(format!(
+                    "light {}: a moving light is previewed from one image per position; \
+                     emitter_basis is for fixed lights",
+                    l.channel
+                )));
+            }
+            for p in &positions {
+                if let Some((palette, _)) = palettes.get_mut(&p.palette) {
+                    palette.lights.push(i);
+                }
+            }
             let emitter_basis = emitter_basis(l, &profiles[profile]).map_err(invalid)?;
             let emitter_measured = emitter_measured(l, &profiles[profile]).map_err(invalid)?;
             groups[group].lights.push(i);
@@ -406,13 +551,14 @@ impl Scene {
                     .clone()
                     .unwrap_or_else(|| format!("Ch {}", l.channel)),
                 group,
-                basis: dir.join(basis),
+                basis,
                 profile,
                 universe: l.universe,
                 address: l.address,
                 emitter_basis: emitter_basis.into_iter().map(|p| dir.join(p)).collect(),
                 emitter_measured,
                 ma3_id: l.ma3_id.unwrap_or(l.channel),
+                positions,
             });
         }
         let mut ma3_ids: HashMap<u32, u32> = HashMap::with_capacity(lights.len());
@@ -460,8 +606,17 @@ impl Scene {
             lights,
             groups,
             profiles,
+            palettes: palettes.into_values().map(|(p, _)| p).collect(),
             by_address,
         })
+    }
+
+    /// Focus palette `number`.
+    pub fn palette(&self, number: u32) -> Option<&Palette> {
+        self.palettes
+            .binary_search_by_key(&number, |p| p.number)
+            .ok()
+            .map(|i| &self.palettes[i])
     }
 
     /// The light with console channel `channel`.
@@ -503,6 +658,81 @@ impl Scene {
             _ => "no channels".into(),
         }
     }
+}
+
+/// Light `l`'s positions, checked against its profile and against the palettes earlier
+/// lights named (`palettes`, which gains the new numbers and labels).
+fn positions<'a>(
+    l: &'a LightFile,
+    profile: &Profile,
+    palettes: &mut BTreeMap<u32, (Palette, u32)>,
+) -> Result<&'a [PositionFile], String> {
+    let ch = l.channel;
+    if l.positions.is_empty() {
+        return Ok(&l.positions);
+    }
+    if !profile.is_moving() {
+        return Err(format!(
+            "light {ch}: it has [[light.position]] tables but profile `{}` has no pan and \
+             tilt slots (pan or pan16, and tilt or tilt16)",
+            profile.name
+        ));
+    }
+    if l.positions.len() > MAX_POSITIONS {
+        return Err(format!(
+            "light {ch}: {} positions; a light holds at most {MAX_POSITIONS}",
+            l.positions.len()
+        ));
+    }
+    for (k, p) in l.positions.iter().enumerate() {
+        if !(1..=MAX_PALETTE).contains(&p.palette) {
+            return Err(format!(
+                "light {ch}: palette {} is not a focus palette number (1-{MAX_PALETTE})",
+                p.palette
+            ));
+        }
+        if l.positions[..k].iter().any(|o| o.palette == p.palette) {
+            return Err(format!("light {ch}: palette {} is listed twice", p.palette));
+        }
+        for (axis, v, range) in [
+            ("pan", p.pan, profile.pan_range),
+            ("tilt", p.tilt, profile.tilt_range),
+        ] {
+            if !(v.is_finite() && v.abs() <= range / 2.0) {
+                return Err(format!(
+                    "light {ch}: palette {} {axis} {v} is outside profile `{}`'s range \
+                     (-{h}..={h} degrees: {axis}_range {range})",
+                    p.palette,
+                    profile.name,
+                    h = range / 2.0
+                ));
+            }
+        }
+        let name = p.name.as_deref().map(str::trim).filter(|n| !n.is_empty());
+        let (palette, named_by) = palettes.entry(p.palette).or_insert_with(|| {
+            let palette = Palette {
+                number: p.palette,
+                name: None,
+                lights: Vec::new(),
+            };
+            (palette, 0)
+        });
+        match (&palette.name, name) {
+            (Some(had), Some(new)) if had != new => {
+                return Err(format!(
+                    "light {ch}: palette {} is `{new}` here but `{had}` on light {named_by}: \
+                     a palette has one name",
+                    p.palette
+                ));
+            }
+            (None, Some(new)) => {
+                palette.name = Some(new.to_string());
+                *named_by = ch;
+            }
+            _ => {}
+        }
+    }
+    Ok(&l.positions)
 }
 
 /// Light `l`'s table `field` (`map`) in its profile's emitter order: none, or an entry for
@@ -782,5 +1012,144 @@ mod tests {
                 .to_string();
             assert_eq!(e, format!("/s/scene.toml: {says}"));
         }
+    }
+
+    /// A moving head (16-bit pan and tilt) at `address`, its positions' tables after it.
+    fn mover(ch: u32, positions: &[(u32, &str, f64, f64)]) -> String {
+        let mut t = format!(
+            "[[light]]\nchannel = {ch}\nprofile = \"spot\"\nuniverse = 1\naddress = {}\n",
+            ch * 10
+        );
+        for (n, name, pan, tilt) in positions {
+            t += &format!(
+                "[[light.position]]\npalette = {n}\nname = \"{name}\"\npan = {pan}\ntilt = {tilt}\nbasis = \"b/{ch}-{n}.exr\"\n"
+            );
+        }
+        t
+    }
+
+    const SPOT: &str = "[[profile]]\nname = \"spot\"\nchannels = [\"intensity\", \"pan16\", \"tilt16\"]\npan_range = 540\ntilt_range = 270\n";
+
+    #[test]
+    fn movers_list_their_positions_and_share_palettes() {
+        let text = [
+            mover(1, &[(3, "DS centre", -12.5, 41.0), (1, "home", 0.0, 0.0)]),
+            mover(2, &[(3, "DS centre", 10.0, 40.0)]),
+            SPOT.to_string(),
+            LIGHT
+                .replace("channel = 1", "channel = 9")
+                .replace("address = 1", "address = 90")
+                .replace("\"p\"", "\"dimmer\""),
+        ]
+        .concat();
+        let scene = Scene::parse(Path::new("/s"), &text).expect("parses");
+        let l = &scene.lights[0];
+        assert!(l.is_moving() && !scene.lights[2].is_moving());
+        assert_eq!(
+            l.basis,
+            PathBuf::from("/s/b/1-3.exr"),
+            "its first position's image"
+        );
+        assert_eq!(l.positions[1].palette, 1);
+        assert_eq!(scene.profile(0).footprint(), 5);
+        let numbers: Vec<(u32, Option<&str>, Vec<usize>)> = scene
+            .palettes
+            .iter()
+            .map(|p| (p.number, p.name.as_deref(), p.lights.clone()))
+            .collect();
+        assert_eq!(
+            numbers,
+            [
+                (1, Some("home"), vec![0]),
+                (3, Some("DS centre"), vec![0, 1])
+            ]
+        );
+        let level = |position| look::Level {
+            position,
+            ..look::Level::OFF
+        };
+        assert_eq!(l.position_of(&level(Some(1))).map(|p| p.pan), Some(0.0));
+        assert_eq!(l.position_of(&level(None)).map(|p| p.palette), Some(3));
+        assert_eq!(l.position_of(&level(Some(7))).map(|p| p.palette), Some(3));
+        assert_eq!(scene.lights[2].position_of(&level(Some(1))), None);
+        // Written back, it reads the same.
+        let file = SceneFile::parse(Path::new("/s/scene.toml"), &text).expect("file");
+        let again = Scene::parse(Path::new("/s"), &file.to_toml().expect("toml")).expect("again");
+        assert_eq!(again.lights[0].positions, l.positions);
+        assert_eq!(again.palettes, scene.palettes);
+    }
+
+    #[test]
+    fn broken_movers_are_refused_with_the_reason() {
+        let bad = |text: String| {
+            Scene::parse(Path::new("/s"), &format!("{text}{SPOT}"))
+                .unwrap_err()
+                .to_string()
+                .trim_start_matches("/s/scene.toml: ")
+                .to_string()
+        };
+        assert_eq!(
+            bad([
+                mover(1, &[(3, "DS centre", 0.0, 0.0)]),
+                mover(2, &[(3, "DS left", 0.0, 0.0)])
+            ]
+            .concat()),
+            "light 2: palette 3 is `DS left` here but `DS centre` on light 1: a palette has one name"
+        );
+        assert_eq!(
+            bad(mover(1, &[(3, "a", 271.0, 0.0)])),
+            "light 1: palette 3 pan 271 is outside profile `spot`'s range (-270..=270 degrees: pan_range 540)"
+        );
+        assert_eq!(
+            bad(mover(1, &[(3, "a", 0.0, -136.0)])),
+            "light 1: palette 3 tilt -136 is outside profile `spot`'s range (-135..=135 degrees: tilt_range 270)"
+        );
+        assert_eq!(
+            bad(mover(1, &[(3, "a", 0.0, 0.0), (3, "a", 1.0, 0.0)])),
+            "light 1: palette 3 is listed twice"
+        );
+        assert_eq!(
+            bad(mover(1, &[(0, "a", 0.0, 0.0)])),
+            "light 1: palette 0 is not a focus palette number (1-9999)"
+        );
+        assert_eq!(
+            bad(mover(1, &[(1, "a", 0.0, 0.0)]).replace("\"spot\"\nuniverse", "\"irgb\"\nuniverse")),
+            "light 1: it has [[light.position]] tables but profile `irgb` has no pan and tilt slots (pan or pan16, and tilt or tilt16)"
+        );
+        assert_eq!(
+            bad(mover(1, &[(1, "a", 0.0, 0.0)]).replace("universe", "basis = \"x.exr\"\nuniverse")),
+            "light 1: a moving light gives one basis image per [[light.position]], not `basis`"
+        );
+        assert_eq!(
+            bad(mover(1, &[])),
+            "light 1: no basis image: give `basis`, or [[light.position]] tables for a moving light"
+        );
+        assert_eq!(
+            bad(mover(1, &[(1, "a", 0.0, 0.0)]).replace("b/1-1.exr", "../x.exr")),
+            "light 1: basis `../x.exr` must be a relative path inside the scene folder"
+        );
+        let p = |range: &str| {
+            Scene::parse(
+                Path::new("/s"),
+                &format!(
+                    "{}{}",
+                    mover(1, &[(1, "a", 0.0, 0.0)]),
+                    SPOT.replace("pan_range = 540", range)
+                ),
+            )
+            .map(|_| ())
+            .map_err(|e| e.to_string())
+        };
+        assert!(
+            p("pan_range = 0")
+                .unwrap_err()
+                .contains("pan_range 0 must be the full travel")
+        );
+        assert!(
+            p("pan_range = nan")
+                .unwrap_err()
+                .contains("pan_range NaN must be")
+        );
+        assert!(p("pan_range = 630").is_ok());
     }
 }

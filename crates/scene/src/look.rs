@@ -16,6 +16,10 @@ pub struct Level {
     pub intensity: f32,
     /// sRGB colour, 0..1 per channel.
     pub color: [f32; 3],
+    /// A moving light's focus palette (its number); `None`, or a palette the light does
+    /// not have, is its first position. Fixed lights ignore it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub position: Option<u32>,
 }
 
 impl Level {
@@ -23,7 +27,17 @@ impl Level {
     pub const OFF: Level = Level {
         intensity: 0.0,
         color: [1.0, 1.0, 1.0],
+        position: None,
     };
+
+    /// A level of a fixed light (or a mover in its first position).
+    pub const fn new(intensity: f32, color: [f32; 3]) -> Level {
+        Level {
+            intensity,
+            color,
+            position: None,
+        }
+    }
 
     /// The plain linear RGB multiplier of this level: the decoded colour times the
     /// intensity. What a light without additive emitters (a dimmer, a CMY fixture) applies
@@ -67,6 +81,9 @@ pub struct LightEntry {
     /// sRGB 0..1; omitted for lights without colour.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub color: Option<[f32; 3]>,
+    /// A moving light's focus palette; omitted for fixed lights.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub position: Option<u32>,
 }
 
 /// A look file (docs/cli.md): what `render --look` reads and the daemon saves.
@@ -119,12 +136,25 @@ impl LookFile {
                 refused.push(why);
                 continue;
             }
+            let light = &scene.lights[i];
+            if let Some(n) = e.position
+                && light.is_moving()
+                && light.position_index(n).is_none()
+            {
+                refused.push(format!(
+                    "light {} has no palette {n} (it has {})",
+                    e.channel,
+                    light.palette_list()
+                ));
+                continue;
+            }
             look.levels[i] = Level {
                 intensity: e.intensity,
                 color: match (scene.profile(i).has_colour(), e.color) {
                     (true, Some(c)) => c,
                     _ => [1.0; 3],
                 },
+                position: e.position.filter(|_| light.is_moving()),
             };
         }
         (look, refused)
@@ -180,6 +210,7 @@ pub fn entries(scene: &Scene, look: &Look) -> Vec<LightEntry> {
             channel: light.channel,
             intensity: lv.intensity,
             color: scene.profile(i).has_colour().then_some(lv.color),
+            position: light.position_of(lv).map(|p| p.palette),
         })
         .collect()
 }

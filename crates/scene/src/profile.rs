@@ -43,6 +43,14 @@ pub enum Slot {
     Yellow,
     /// A constant value, e.g. a strobe "open" or a mode channel.
     Fixed(u8),
+    /// 8-bit pan of a moving light: degrees through [`Profile::pan_range`], 0 at DMX centre.
+    Pan,
+    /// 16-bit pan: coarse then fine slot.
+    Pan16,
+    /// 8-bit tilt, through [`Profile::tilt_range`].
+    Tilt,
+    /// 16-bit tilt: coarse then fine slot.
+    Tilt16,
 }
 
 /// The slot names of the fixed-meaning slots, in the order error messages list them.
@@ -59,12 +67,31 @@ const NAMED: &[(&str, Slot)] = &[
     ("cyan", Slot::Cyan),
     ("magenta", Slot::Magenta),
     ("yellow", Slot::Yellow),
+    ("pan", Slot::Pan),
+    ("pan16", Slot::Pan16),
+    ("tilt", Slot::Tilt),
+    ("tilt16", Slot::Tilt16),
 ];
+
+/// A profile's full pan travel in degrees when it does not say (`pan_range`).
+pub const DEFAULT_PAN_RANGE: f64 = 540.0;
+/// A profile's full tilt travel in degrees when it does not say (`tilt_range`).
+pub const DEFAULT_TILT_RANGE: f64 = 270.0;
 
 impl Slot {
     /// How many DMX slots this takes.
     pub fn width(self) -> usize {
-        if self == Slot::Intensity16 { 2 } else { 1 }
+        if self.is_wide() { 2 } else { 1 }
+    }
+
+    /// Whether this is a 16-bit pair (coarse, fine).
+    pub fn is_wide(self) -> bool {
+        matches!(self, Slot::Intensity16 | Slot::Pan16 | Slot::Tilt16)
+    }
+
+    /// Whether this slot aims the light (pan or tilt, 8- or 16-bit).
+    pub fn is_position(self) -> bool {
+        matches!(self, Slot::Pan | Slot::Pan16 | Slot::Tilt | Slot::Tilt16)
     }
 
     /// Whether this slot changes the light's colour (so the sampler may colour it).
@@ -162,6 +189,12 @@ pub struct ProfileFile {
     pub name: String,
     /// Slot names in DMX order.
     pub channels: Vec<String>,
+    /// Full pan travel in degrees (default [`DEFAULT_PAN_RANGE`]), for `pan`/`pan16`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pan_range: Option<f64>,
+    /// Full tilt travel in degrees (default [`DEFAULT_TILT_RANGE`]), for `tilt`/`tilt16`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tilt_range: Option<f64>,
     /// Emitter colours, where they differ from the defaults.
     #[serde(default, rename = "emitter", skip_serializing_if = "Vec::is_empty")]
     pub emitters: Vec<EmitterFile>,
@@ -176,6 +209,10 @@ pub struct Profile {
     pub slots: Vec<Slot>,
     /// One per additive slot, in slot order; `Slot::Emitter(k)` is `emitters[k]`.
     pub emitters: Vec<Emitter>,
+    /// Full pan travel in degrees: DMX 0 is `-pan_range / 2`, full is `+pan_range / 2`.
+    pub pan_range: f64,
+    /// Full tilt travel in degrees, likewise.
+    pub tilt_range: f64,
 }
 
 /// The profiles every scene knows without defining them (docs/scene.md), in the slot
@@ -209,6 +246,8 @@ impl Profile {
             name: (*n).to_string(),
             channels: channels.iter().map(|c| (*c).to_string()).collect(),
             emitters: Vec::new(),
+            pan_range: None,
+            tilt_range: None,
         };
         Profile::from_file(&file).ok()
     }
@@ -275,10 +314,19 @@ impl Profile {
                 ));
             }
         }
+        let range = |given: Option<f64>, default: f64, key: &str| match given {
+            None => Ok(default),
+            Some(r) if r.is_finite() && r > 0.0 && r <= 3600.0 => Ok(r),
+            Some(r) => Err(format!(
+                "profile `{name}`: {key} {r} must be the full travel in degrees, above 0 and at most 3600"
+            )),
+        };
         Ok(Profile {
             name: name.clone(),
             slots,
             emitters,
+            pan_range: range(file.pan_range, DEFAULT_PAN_RANGE, "pan_range")?,
+            tilt_range: range(file.tilt_range, DEFAULT_TILT_RANGE, "tilt_range")?,
         })
     }
 
@@ -299,6 +347,8 @@ impl Profile {
             name: self.name.clone(),
             channels: self.channel_names(),
             emitters,
+            pan_range: (self.pan_range != DEFAULT_PAN_RANGE).then_some(self.pan_range),
+            tilt_range: (self.tilt_range != DEFAULT_TILT_RANGE).then_some(self.tilt_range),
         }
     }
 
@@ -332,6 +382,24 @@ impl Profile {
         self.slots
             .iter()
             .any(|s| matches!(s, Slot::Intensity | Slot::Intensity16))
+    }
+
+    /// Whether the fixture can be aimed: it has a pan slot and a tilt slot, so it can take
+    /// a light's positions (`[[light.position]]`).
+    pub fn is_moving(&self) -> bool {
+        let has = |a: Slot, b: Slot| self.slots.iter().any(|&s| s == a || s == b);
+        has(Slot::Pan, Slot::Pan16) && has(Slot::Tilt, Slot::Tilt16)
+    }
+
+    /// The DMX level (0..1) of `degrees` from the centre of a travel of `range` degrees.
+    pub fn position_level(degrees: f64, range: f64) -> f32 {
+        (0.5 + degrees / range).clamp(0.0, 1.0) as f32
+    }
+
+    /// The degrees from centre of DMX `level` (0..1) through a travel of `range` degrees:
+    /// the inverse of [`Profile::position_level`].
+    pub fn position_degrees(level: f32, range: f64) -> f64 {
+        (f64::from(level) - 0.5) * range
     }
 
     /// Every additive emitter's CIE XYZ at full, in slot order (the order of
@@ -402,6 +470,8 @@ mod tests {
             name: "p".into(),
             channels: channels.iter().map(|c| c.to_string()).collect(),
             emitters,
+            pan_range: None,
+            tilt_range: None,
         }
     }
 

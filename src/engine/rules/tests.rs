@@ -53,6 +53,7 @@ fn excluded_and_pinned_lights_keep_the_base_bit_for_bit_on_a_real_stage() {
             .map(|i| Level {
                 intensity: 0.05 + 0.9 * ((i * 37 % 8) as f32 / 8.0),
                 color: [0.9, 0.2 + 0.5 * (i % 3) as f32 / 2.0, 0.1],
+                position: None,
             })
             .collect(),
     };

@@ -189,6 +189,7 @@ mod tests {
                 let level = Level {
                     intensity: next(),
                     color,
+                    position: None,
                 };
                 let (got, want) = (m.multiplier(&level), level.multiplier());
                 for k in 0..3 {
@@ -209,6 +210,7 @@ mod tests {
                 let got = m.multiplier(&Level {
                     intensity,
                     color: [1.0; 3],
+                    position: None,
                 });
                 for v in got {
                     assert!((v - intensity).abs() <= 1e-6, "{name}: {got:?}");
@@ -230,6 +232,7 @@ mod tests {
         let level = Level {
             intensity: 0.4,
             color: [1.0, 0.5, 0.2],
+            position: None,
         };
         assert_eq!(ColourModel::plain().multiplier(&level), level.multiplier());
         assert_eq!(model("dimmer").multiplier(&level), level.multiplier());
@@ -287,6 +290,8 @@ mod tests {
             .map(String::from)
             .to_vec(),
             emitters: Vec::new(),
+            pan_range: None,
+            tilt_range: None,
         };
         ColourModel::new(&Profile::from_file(&file).expect("parses"))
     }
@@ -301,6 +306,7 @@ mod tests {
             let got = m.multiplier(&Level {
                 intensity,
                 color: [1.0; 3],
+                position: None,
             });
             assert!(got.iter().all(|v| (v - intensity).abs() < 1e-6), "{got:?}");
         }
@@ -320,6 +326,7 @@ mod tests {
             let got = m.multiplier(&Level {
                 intensity: 0.8,
                 color,
+                position: None,
             });
             for k in 0..3 {
                 assert!((got[k] - 0.8 * want[k]).abs() < 1e-5, "{color:?}: {got:?}");
@@ -339,6 +346,8 @@ mod tests {
                 xy: Some([0.55, 0.40]),
                 flux: None,
             }],
+            pan_range: None,
+            tilt_range: None,
         };
         let profile = Profile::from_file(&file).expect("parses");
         let m = ColourModel::new(&profile);
@@ -348,6 +357,7 @@ mod tests {
         let got = m.multiplier(&Level {
             intensity: 1.0,
             color: [1.0, 0.0, 0.0],
+            position: None,
         });
         // What the red emitter alone shows relative to white, computed here from its XYZ.
         let want = m.relative(red);
