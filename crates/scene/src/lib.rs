@@ -501,7 +501,7 @@ impl Scene {
             };
             let positions = positions(l, &profiles[profile], &mut palettes)
                 .map_err(invalid)?
-                .into_iter()
+                .iter()
                 .map(|p| {
                     Ok(Position {
                         palette: p.palette,
