@@ -50,6 +50,10 @@ pub struct BasisImages {
     /// Per light, the first of its per-emitter images (one per emitter of its colour model,
     /// in slot order), or `None` when it was captured at white only.
     pub emitter_images: Vec<Option<usize>>,
+    /// Per light, its positions' images as (focus palette, image), in the scene's order,
+    /// the first being its white image; empty for a fixed light. A look's level picks one
+    /// ([`BasisImages::image_of`]).
+    pub positions: Vec<Vec<(u32, usize)>>,
     /// Per light, how a look's level becomes the multiplier of its image (each image is
     /// its light at white through its profile): from the scene at [`load`], plain linear
     /// colour for images made by [`BasisImages::from_planes`].
@@ -115,6 +119,7 @@ impl BasisImages {
             lights,
             images,
             emitter_images,
+            positions: vec![Vec::new(); lights],
             colours: vec![ColourModel::plain(); lights],
             samples: match precision {
                 Precision::Half => Samples::Half(in_huge_pages(n, f16::ZERO)),
@@ -171,6 +176,15 @@ impl BasisImages {
                 .map(Rows::Single)
                 .collect(),
         }
+    }
+
+    /// The image light `light` lights in position `palette` (`None`, or a palette it does
+    /// not have: its first position, its white image): what the compositor weighs.
+    pub fn image_of(&self, light: usize, palette: Option<u32>) -> usize {
+        let held = &self.positions[light];
+        palette
+            .and_then(|n| held.iter().find(|(p, _)| *p == n))
+            .map_or(light, |&(_, image)| image)
     }
 
     /// Pixels per image.
@@ -529,6 +543,25 @@ pub fn load(scene: &Scene, widths: &[(usize, Precision)]) -> Result<Loaded, Scen
             })
         })
         .collect();
+    // Then a moving light's other positions (its first is its white image).
+    let positions: Vec<Vec<(u32, usize)>> = scene
+        .lights
+        .iter()
+        .enumerate()
+        .map(|(l, light)| {
+            let mut held = Vec::with_capacity(light.positions.len());
+            for (k, p) in light.positions.iter().enumerate() {
+                if k == 0 {
+                    held.push((p.palette, l));
+                } else {
+                    held.push((p.palette, files.len()));
+                    files.push(p.basis.as_path());
+                    owner.push(l);
+                }
+            }
+            held
+        })
+        .collect();
     let mut images: Vec<BasisImages> = widths
         .iter()
         .map(|&(width, precision)| {
@@ -633,6 +666,7 @@ pub fn load(scene: &Scene, widths: &[(usize, Precision)]) -> Result<Loaded, Scen
     let colours: Vec<ColourModel> = (0..lights).map(|l| scene.colour_model(l)).collect();
     for img in &mut images {
         img.colours.clone_from(&colours);
+        img.positions.clone_from(&positions);
     }
     Ok(Loaded { images, unseen })
 }

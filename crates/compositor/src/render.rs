@@ -65,7 +65,8 @@ pub fn exposure_gain(stops: f32) -> f32 {
 /// captured at white only weighs its white image by its colour model's multiplier
 /// ([`BasisImages::colours`]); one captured per emitter weighs each emitter's image by the
 /// level the colour solve sends that emitter (times the intensity), and its white image by
-/// 0, so the preview is the sum of what the camera saw of each emitter.
+/// 0, so the preview is the sum of what the camera saw of each emitter. A moving light
+/// weighs only the image of the position the look puts it in.
 pub fn weights(basis: &BasisImages, looks: &[&Look], gain: f32) -> Vec<Vec<[f32; 3]>> {
     looks
         .par_iter()
@@ -79,7 +80,9 @@ pub fn weights(basis: &BasisImages, looks: &[&Look], gain: f32) -> Vec<Vec<[f32;
                 .enumerate()
             {
                 match emitters {
-                    None => w[l] = colour.multiplier(lv).map(|m| m * gain),
+                    None => {
+                        w[basis.image_of(l, lv.position)] = colour.multiplier(lv).map(|m| m * gain)
+                    }
                     Some(first) if lv.intensity > 0.0 => {
                         let k = lv.intensity * gain;
                         for (wi, level) in
@@ -986,7 +989,7 @@ pub fn render_reference(basis: &BasisImages, look: &Look, gain: f32) -> Vec<f32>
     };
     for (l, (lv, colour)) in look.levels.iter().zip(&basis.colours).enumerate() {
         match basis.emitter_images[l] {
-            None => add(l, colour.multiplier(lv)),
+            None => add(basis.image_of(l, lv.position), colour.multiplier(lv)),
             Some(first) => {
                 for (k, level) in colour.solve(lv.color).levels().iter().enumerate() {
                     add(first + k, [*level as f32 * lv.intensity; 3]);

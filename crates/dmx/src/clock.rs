@@ -160,7 +160,7 @@ impl Clock {
             self.target.clone()
         } else {
             let t = elapsed.as_secs_f32() / self.fade.as_secs_f32();
-            SlotLevels::crossfade(&self.from, &self.target, t)
+            self.wiring.patch.crossfade(&self.from, &self.target, t)
         }
     }
 

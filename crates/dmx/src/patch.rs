@@ -7,7 +7,7 @@
 use visobjd_scene::Scene;
 use visobjd_scene::emitter::ColourModel;
 use visobjd_scene::look::{Level, Look};
-use visobjd_scene::profile::Slot;
+use visobjd_scene::profile::{Profile, Slot};
 use visobjd_scene::srgb::linear_to_srgb;
 
 /// Slots in a DMX universe.
@@ -37,6 +37,33 @@ struct Placed {
     has_intensity: bool,
     /// How the light's additive emitters mix a colour.
     colour: ColourModel,
+    /// A moving light's positions as (focus palette, pan level, tilt level), DMX levels
+    /// through its profile's ranges; empty for a fixed light (its pan and tilt, if it has
+    /// them, stay at centre).
+    positions: Vec<(u32, [f32; 2])>,
+    /// For a light with pan or tilt slots: the global indices ([`SlotLevels`]) of its
+    /// slots that carry intensity, with their rule, and of its pan and tilt slots, so a
+    /// fade can tell a dark mover and move it at once.
+    aim: Option<Aim>,
+}
+
+/// Where a light with pan or tilt slots keeps its intensity and its aim in a frame.
+#[derive(Debug, Clone)]
+struct Aim {
+    intensity: Vec<(usize, Rule)>,
+    position: Vec<usize>,
+}
+
+impl Aim {
+    /// Whether the light gives no light in `levels` (every intensity slot at its dark
+    /// end; a light whose slots carry no intensity is never dark).
+    fn dark(&self, levels: &[f32]) -> bool {
+        !self.intensity.is_empty()
+            && self.intensity.iter().all(|&(i, rule)| match rule {
+                Rule::Complement => levels[i] >= 1.0,
+                _ => levels[i] <= 0.0,
+            })
+    }
 }
 
 impl Placed {
@@ -124,6 +151,10 @@ impl Patch {
             let offset = usize::from(light.address.max(1)) - 1;
             let has_intensity = profile.has_intensity();
             let mut at = offset;
+            let mut aim = Aim {
+                intensity: Vec::new(),
+                position: Vec::new(),
+            };
             for &slot in &profile.slots {
                 let rule = match slot {
                     Slot::Intensity | Slot::Intensity16 => Rule::Scale,
@@ -133,18 +164,34 @@ impl Patch {
                 };
                 if at + slot.width() <= SLOTS {
                     rules[universe][at] = rule;
-                    if slot == Slot::Intensity16 {
+                    if slot.is_wide() {
                         wide[universe].push(at);
+                    }
+                    if slot.is_position() {
+                        aim.position.push(universe * SLOTS + at);
+                    } else if rule != Rule::Keep {
+                        aim.intensity.push((universe * SLOTS + at, rule));
                     }
                 }
                 at += slot.width();
             }
+            let positions = light
+                .positions
+                .iter()
+                .map(|p| {
+                    let pan = Profile::position_level(p.pan, profile.pan_range);
+                    let tilt = Profile::position_level(p.tilt, profile.tilt_range);
+                    (p.palette, [pan, tilt])
+                })
+                .collect();
             lights.push(Placed {
                 universe,
                 offset,
                 slots: profile.slots.clone(),
                 has_intensity,
                 colour: scene.colour_model(i),
+                positions,
+                aim: (!aim.position.is_empty()).then_some(aim),
             });
         }
         Patch {
@@ -188,6 +235,12 @@ impl Patch {
             let intensity = unit(level.intensity);
             let color = level.color.map(unit);
             let fold = if light.has_intensity { 1.0 } else { intensity };
+            let [pan, tilt] = light
+                .positions
+                .iter()
+                .find(|(n, _)| Some(*n) == level.position)
+                .or(light.positions.first())
+                .map_or([0.5; 2], |&(_, aim)| aim);
             let solution = light.colour.solve(color).at(f64::from(fold));
             let emitters = solution.levels();
             let flags = Level {
@@ -206,10 +259,28 @@ impl Patch {
                         Slot::Magenta => 1.0 - flags[1],
                         Slot::Yellow => 1.0 - flags[2],
                         Slot::Fixed(n) => f32::from(n) / 255.0,
+                        Slot::Pan | Slot::Pan16 => pan,
+                        Slot::Tilt | Slot::Tilt16 => tilt,
                         _ => 0.0,
                     },
                 }))
             });
+        }
+        frame
+    }
+
+    /// The frame `t` (0..1) of the way through a fade from `from` to `to` (unmastered
+    /// levels): every slot linearly ([`SlotLevels::crossfade`]), but a moving light that
+    /// is dark in both takes its new pan and tilt at once, so nobody sees it sweep
+    /// ("move in dark"); one that is lit in either moves with the fade.
+    pub fn crossfade(&self, from: &SlotLevels, to: &SlotLevels, t: f32) -> SlotLevels {
+        let mut frame = SlotLevels::crossfade(from, to, t);
+        for aim in self.lights.iter().filter_map(|l| l.aim.as_ref()) {
+            if aim.dark(&from.levels) && aim.dark(&to.levels) {
+                for &i in &aim.position {
+                    frame.levels[i] = to.levels[i];
+                }
+            }
         }
         frame
     }
@@ -293,7 +364,7 @@ impl Patch {
                     .map(|&slot| {
                         let v = levels.get(at).copied().unwrap_or(0.0);
                         at += slot.width();
-                        let v = if slot == Slot::Intensity16 {
+                        let v = if slot.is_wide() {
                             f32::from(fine(v)) / 65535.0
                         } else {
                             f32::from(coarse(v)) / 255.0
@@ -407,7 +478,7 @@ fn read(light: &Placed, bytes: &[[u8; SLOTS]]) -> (Option<f32>, Read) {
     let mut flags = None::<[f32; 3]>;
     let mut at = light.offset;
     for &slot in &light.slots {
-        let v = if slot == Slot::Intensity16 {
+        let v = if slot.is_wide() {
             (byte(at) * 256.0 + byte(at + 1)) / 65535.0
         } else {
             byte(at) / 255.0
@@ -834,5 +905,90 @@ mod tests {
             "dark rgbw is white at 0"
         );
         assert_eq!(l[9].intensity, 0.0, "universe 3 is missing: dark");
+    }
+
+    /// Two movers (16-bit and 8-bit pan/tilt) and a fixed light with pan/tilt slots.
+    fn movers() -> Scene {
+        let mut text = String::from(
+            "[[profile]]\nname = \"spot\"\nchannels = [\"intensity\", \"pan16\", \"tilt16\"]\n\
+             [[profile]]\nname = \"wash\"\nchannels = [\"red\", \"green\", \"blue\", \"pan\", \"tilt\"]\npan_range = 360\ntilt_range = 180\n",
+        );
+        for (ch, profile, address) in [(1, "spot", 1), (2, "wash", 11)] {
+            text += &format!(
+                "[[light]]\nchannel = {ch}\nprofile = \"{profile}\"\nuniverse = 1\naddress = {address}\n\
+                 [[light.position]]\npalette = 1\npan = -90.0\ntilt = 45.0\nbasis = \"a.exr\"\n\
+                 [[light.position]]\npalette = 2\npan = 90.0\ntilt = -45.0\nbasis = \"b.exr\"\n"
+            );
+        }
+        text += "[[light]]\nchannel = 3\nbasis = \"c.exr\"\nprofile = \"spot\"\nuniverse = 1\naddress = 21\n";
+        Scene::parse(Path::new("/nonexistent"), &text).expect("test scene parses")
+    }
+
+    fn aimed(scene: &Scene, intensity: f32, position: Option<u32>) -> Look {
+        Look {
+            levels: vec![
+                Level {
+                    intensity,
+                    color: [1.0; 3],
+                    position,
+                };
+                scene.lights.len()
+            ],
+        }
+    }
+
+    #[test]
+    fn pan_and_tilt_go_out_from_degrees_through_the_range() {
+        let scene = movers();
+        let patch = Patch::new(&scene);
+        let wire = |look: &Look| patch.quantise(&patch.unmastered(look))[0];
+        let b = wire(&aimed(&scene, 1.0, Some(2)));
+        let word = |at: usize| u16::from(b[at]) << 8 | u16::from(b[at + 1]);
+        // Spot: pan 90 of 540 -> 0.5 + 1/6; tilt -45 of 270 -> 0.5 - 1/6, 16-bit.
+        assert_eq!(word(1), (65535.0f64 * (0.5 + 90.0 / 540.0)).round() as u16);
+        assert_eq!(word(3), (65535.0f64 * (0.5 - 45.0 / 270.0)).round() as u16);
+        // Wash: 8-bit, pan 90 of 360 -> 0.75, tilt -45 of 180 -> 0.25.
+        assert_eq!(b[13..15], [191, 64]);
+        // No position, or one it lacks: the first; the master never moves a light.
+        let first = wire(&aimed(&scene, 1.0, None));
+        assert_eq!(first, wire(&aimed(&scene, 1.0, Some(9))));
+        assert_eq!(first[13..15], [64, 191]);
+        let dim = patch.quantise(&patch.levels(&aimed(&scene, 1.0, None), 0.2))[0];
+        assert_eq!(dim[1..5], first[1..5]);
+        assert_eq!(dim[13..15], first[13..15]);
+        // A fixed light with pan and tilt slots stays at centre.
+        assert_eq!(first[21..25], [128, 0, 128, 0]);
+    }
+
+    #[test]
+    fn a_fade_moves_a_lit_mover_and_a_dark_one_at_once() {
+        let scene = movers();
+        let patch = Patch::new(&scene);
+        let pan = |f: &SlotLevels| f.universe(0)[1];
+        let at =
+            |a: &Look, b: &Look, t| patch.crossfade(&patch.unmastered(a), &patch.unmastered(b), t);
+        let (lit1, lit2) = (aimed(&scene, 1.0, Some(1)), aimed(&scene, 1.0, Some(2)));
+        let (dark1, dark2) = (aimed(&scene, 0.0, Some(1)), aimed(&scene, 0.0, Some(2)));
+        let (p1, p2) = (pan(&patch.unmastered(&lit1)), pan(&patch.unmastered(&lit2)));
+        for t in [0.0, 0.25, 0.5, 1.0] {
+            let want = p1 + (p2 - p1) * t;
+            assert!(
+                (pan(&at(&lit1, &lit2, t)) - want).abs() < 1e-6,
+                "lit at {t}"
+            );
+            assert!(
+                (pan(&at(&lit1, &dark2, t)) - want).abs() < 1e-6,
+                "fading out at {t}"
+            );
+            assert!(
+                (pan(&at(&dark1, &lit2, t)) - want).abs() < 1e-6,
+                "fading in at {t}"
+            );
+            assert_eq!(pan(&at(&dark1, &dark2, t)), p2, "dark at {t}");
+        }
+        // The wash has no dimmer: its emitters carry its intensity.
+        let wash = |f: &SlotLevels| f.universe(0)[13];
+        assert_eq!(wash(&at(&dark1, &dark2, 0.3)), 0.75);
+        assert!(wash(&at(&lit1, &lit2, 0.3)) < 0.75);
     }
 }

@@ -193,7 +193,8 @@ impl RatioTree {
     }
 }
 
-/// `onto` with the lights marked in `lights` taken from `from` (intensity and colour), the
+/// `onto` with the lights marked in `lights` taken from `from` (intensity, colour and a
+/// mover's position), the
 /// rest untouched: a transfer of one area or one group of a candidate onto the live look.
 pub fn transfer(onto: &Look, from: &Look, lights: &[bool]) -> Look {
     let mut out = onto.clone();

@@ -7,11 +7,12 @@
 //! cheap enough to call thousands of times.
 
 use rand::Rng;
-use rand::seq::SliceRandom;
+use rand::seq::{IndexedRandom, SliceRandom};
 use rand_distr::{Distribution, Normal};
 
 use crate::constrain::{Ratio, RatioTree, Saturation, clamp_saturation, ratio_trees};
 use crate::objective::{Aspects, PaletteColor, nearest};
+use crate::targeting::Reach;
 use visobjd_compositor::color::srgb_to_lab;
 use visobjd_scene::look::Look;
 use visobjd_scene::srgb::{linear_to_srgb, srgb_to_linear};
@@ -90,6 +91,9 @@ pub struct Target {
     pub selected: Vec<bool>,
     /// Per light: mean luminance added in the region per unit of intensity.
     pub sensitivity: Vec<f32>,
+    /// Per light, per position (empty for a fixed light): whether the region selects it
+    /// there, and its sensitivity there.
+    pub positions: Vec<Vec<Reach>>,
     /// mu_a, 0..1.
     pub mean: f32,
     /// mu_k, 0..1.
@@ -123,15 +127,32 @@ impl Default for Spread {
 #[derive(Debug, Clone)]
 struct Unit {
     lights: Vec<usize>,
-    /// Brightness normalisation factor (4.2.5).
+    /// Brightness normalisation factor (4.2.5), for a unit without moving lights.
     factor: f32,
     /// Belongs to a designated key group.
     designated: bool,
+    /// Its moving lights' sensitivity per focus palette: their factor follows the
+    /// position drawn ([`IntensityStep::factor`]).
+    movers: Vec<(usize, Vec<(u32, f32)>)>,
+    /// The sensitivity of its fixed lights.
+    fixed: f32,
+}
+
+/// The moving lights of one sampling unit of one objective, and the focus palettes they
+/// may take: one is drawn per candidate, uniformly, and every mover of the unit goes to
+/// it (each with its own pan and tilt).
+#[derive(Debug, Clone)]
+struct PositionUnit {
+    movers: Vec<usize>,
+    choices: Vec<u32>,
 }
 
 #[derive(Debug, Clone)]
 struct IntensityStep {
     units: Vec<Unit>,
+    /// The mean of 1/sensitivity over the units that light the region (0: none does),
+    /// what a factor is relative to.
+    mean_inv: f32,
     /// Fully locked units count as already set (their base values).
     locked_units: usize,
     locked_sum: f32,
@@ -155,6 +176,8 @@ struct ColorStep {
 /// The per-generate preparation of objectives against a rig, constraints and base look.
 #[derive(Debug, Clone)]
 pub struct Plan {
+    /// Per objective (larger regions first), its moving lights' choices.
+    positions: Vec<Vec<PositionUnit>>,
     intensity: Vec<IntensityStep>,
     color: Vec<ColorStep>,
     spread: Spread,
@@ -198,8 +221,10 @@ impl Plan {
         let group_of = rig.group_of();
         let mut intensity = Vec::new();
         let mut color = Vec::new();
+        let mut positions = Vec::new();
         for (i, t) in order {
             let units = units(rig, constraints, t);
+            positions.push(position_units(constraints, t, &units));
             if t.aspects.intensity() || lit_for_color.contains(&i) {
                 intensity.push(intensity_step(constraints, &group_of, t, &units, base));
             }
@@ -208,6 +233,7 @@ impl Plan {
             }
         }
         Plan {
+            positions,
             intensity,
             color,
             spread,
@@ -235,6 +261,13 @@ impl Plan {
         for &l in &self.off {
             look.levels[l].intensity = 0.0;
         }
+        for unit in self.positions.iter().flatten() {
+            if let Some(&palette) = unit.choices.choose(rng) {
+                for &l in &unit.movers {
+                    look.levels[l].position = Some(palette);
+                }
+            }
+        }
         for step in &self.intensity {
             let keys = if step.designated_keys {
                 Keys::Designated(step.units.iter().map(|u| u.designated).collect())
@@ -252,7 +285,7 @@ impl Plan {
                 rng,
             );
             for (unit, x) in step.units.iter().zip(values) {
-                let v = (x * unit.factor).min(1.0);
+                let v = (x * step.factor(unit, &look)).min(1.0);
                 for &l in &unit.lights {
                     look.levels[l].intensity = v;
                 }
@@ -296,6 +329,95 @@ fn dark_color_targets(
         })
         .map(|(i, _)| i)
         .collect()
+}
+
+impl IntensityStep {
+    /// `unit`'s brightness normalisation factor in `look`: fixed at plan time, or for a
+    /// unit with moving lights from the sensitivity of the positions `look` gives them.
+    fn factor(&self, unit: &Unit, look: &Look) -> f32 {
+        if unit.movers.is_empty() {
+            return unit.factor;
+        }
+        let s = unit.fixed
+            + unit
+                .movers
+                .iter()
+                .map(|(l, by)| mover_sensitivity(by, look.levels[*l].position))
+                .sum::<f32>();
+        if s > 0.0 && self.mean_inv > 0.0 {
+            (1.0 / s) / self.mean_inv
+        } else {
+            1.0
+        }
+    }
+}
+
+/// A mover's sensitivity at `palette` (`None` or one it lacks: its first position's).
+fn mover_sensitivity(by_palette: &[(u32, f32)], palette: Option<u32>) -> f32 {
+    palette
+        .and_then(|n| by_palette.iter().find(|(p, _)| *p == n))
+        .or(by_palette.first())
+        .map_or(0.0, |&(_, s)| s)
+}
+
+/// The moving lights of each of `t`'s sampling units that the sampler may aim, and the
+/// palettes it draws from: those every free mover of the unit has, narrowed to the ones
+/// where the region selects at least one of them (all of them when it selects none).
+/// Movers without a palette in common are drawn one by one.
+fn position_units(
+    constraints: &Constraints,
+    t: &Target,
+    all_units: &[Vec<usize>],
+) -> Vec<PositionUnit> {
+    let free =
+        |l: &usize| !t.positions[*l].is_empty() && !constraints.locked[*l] && !constraints.off[*l];
+    let mut out = Vec::new();
+    for members in all_units {
+        let movers: Vec<usize> = members.iter().copied().filter(free).collect();
+        let Some(&first) = movers.first() else {
+            continue;
+        };
+        let common: Vec<u32> = t.positions[first]
+            .iter()
+            .map(|r| r.palette)
+            .filter(|&n| {
+                movers
+                    .iter()
+                    .all(|&l| t.positions[l].iter().any(|r| r.palette == n))
+            })
+            .collect();
+        let narrowed = |lights: &[usize], palettes: &[u32]| -> Vec<u32> {
+            let aimed: Vec<u32> = palettes
+                .iter()
+                .copied()
+                .filter(|&n| {
+                    lights
+                        .iter()
+                        .any(|&l| t.positions[l].iter().any(|r| r.palette == n && r.selected))
+                })
+                .collect();
+            if aimed.is_empty() {
+                palettes.to_vec()
+            } else {
+                aimed
+            }
+        };
+        if common.is_empty() {
+            for l in movers {
+                let own: Vec<u32> = t.positions[l].iter().map(|r| r.palette).collect();
+                out.push(PositionUnit {
+                    choices: narrowed(&[l], &own),
+                    movers: vec![l],
+                });
+            }
+        } else {
+            out.push(PositionUnit {
+                choices: narrowed(&movers, &common),
+                movers,
+            });
+        }
+    }
+    out
 }
 
 /// Number of keys over `units` sampled units: round(b L / 2) (paper 4.2.4).
@@ -343,22 +465,61 @@ fn intensity_step(
                 / members.len() as f32;
         } else {
             let designated = constraints.keys[group_of[free[0]]];
+            let movers: Vec<(usize, Vec<(u32, f32)>)> = free
+                .iter()
+                .filter(|&&l| !t.positions[l].is_empty())
+                .map(|&l| {
+                    let by = t.positions[l]
+                        .iter()
+                        .map(|r| (r.palette, r.sensitivity))
+                        .collect();
+                    (l, by)
+                })
+                .collect();
+            let fixed = free
+                .iter()
+                .filter(|&&l| t.positions[l].is_empty())
+                .map(|&l| t.sensitivity[l])
+                .sum();
             units.push(Unit {
                 lights: free,
                 factor: 1.0,
                 designated,
+                movers,
+                fixed,
             });
         }
     }
     // Brightness normalisation: 1/s rescaled to mean 1 over the units that light the
-    // region; units that do not light it keep factor 1.
+    // region; units that do not light it keep factor 1. A moving light counts with its
+    // mean sensitivity over the positions where the region selects it (all, if none).
     let s: Vec<f32> = units
         .iter()
-        .map(|u| u.lights.iter().map(|&l| t.sensitivity[l]).sum())
+        .map(|u| {
+            let movers: f32 = u
+                .movers
+                .iter()
+                .map(|(l, by)| {
+                    let aimed: Vec<f32> = t.positions[*l]
+                        .iter()
+                        .filter(|r| r.selected)
+                        .map(|r| r.sensitivity)
+                        .collect();
+                    let pool: Vec<f32> = if aimed.is_empty() {
+                        by.iter().map(|&(_, s)| s).collect()
+                    } else {
+                        aimed
+                    };
+                    pool.iter().sum::<f32>() / pool.len().max(1) as f32
+                })
+                .sum();
+            u.fixed + movers
+        })
         .collect();
     let inv: Vec<f32> = s.iter().filter(|&&v| v > 0.0).map(|v| 1.0 / v).collect();
+    let mut mean_inv = 0.0;
     if !inv.is_empty() {
-        let mean_inv = inv.iter().sum::<f32>() / inv.len() as f32;
+        mean_inv = inv.iter().sum::<f32>() / inv.len() as f32;
         for (u, &sv) in units.iter_mut().zip(&s) {
             if sv > 0.0 {
                 u.factor = (1.0 / sv) / mean_inv;
@@ -366,6 +527,7 @@ fn intensity_step(
         }
     }
     IntensityStep {
+        mean_inv,
         designated_keys: constraints.keys.iter().any(|&k| k),
         units,
         locked_units,

@@ -129,6 +129,7 @@ impl Stage {
             area: objective.region.area(),
             selected: self.footprints.select(objective.region),
             sensitivity: self.footprints.sensitivity(objective.region),
+            positions: self.footprints.positions(objective.region),
             mean: stats.mean_l / 100.0,
             key: stats.key_l / 100.0,
             bright: stats.bright,

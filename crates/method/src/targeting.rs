@@ -17,14 +17,18 @@ const BRIGHT_FRACTION: f64 = 0.15;
 /// A light's highlight pixels: its top 5%.
 const HIGHLIGHT_FRACTION: f64 = 0.05;
 
-/// Per-light luminance at the working resolution, and where each light's bright and
-/// highlight pixels are.
+/// Per-image luminance at the working resolution, and where each image's bright and
+/// highlight pixels are: every light's white image, then each moving light's other
+/// positions, so a region selects a mover by the positions it can take.
 #[derive(Debug, Clone)]
 pub struct Footprints {
     width: usize,
     height: usize,
-    /// `luma[l * pixels + p]`.
+    /// `luma[i * pixels + p]` for footprint image `i`: lights first, then positions.
     luma: Vec<f32>,
+    /// Per light, its positions as (focus palette, footprint image); empty for a fixed
+    /// light. The first is the light's own image.
+    positions: Vec<Vec<(u32, usize)>>,
     /// Per light, summed-area tables of its bright and highlight pixels: at each corner of
     /// the pixel grid (`(width + 1) * (height + 1)` per light, row by row) how many lie above
     /// and left of it. A region's counts are then four lookups per light whatever its
@@ -39,11 +43,33 @@ impl Footprints {
         for l in 0..basis.lights {
             luma.extend(basis.luminance(l));
         }
-        Footprints::of_luma(basis.width, basis.height, luma)
+        let mut spots = basis.lights;
+        let positions = basis
+            .positions
+            .iter()
+            .enumerate()
+            .map(|(l, held)| {
+                held.iter()
+                    .map(|&(palette, image)| {
+                        if image == l {
+                            (palette, l)
+                        } else {
+                            luma.extend(basis.luminance(image));
+                            spots += 1;
+                            (palette, spots - 1)
+                        }
+                    })
+                    .collect()
+            })
+            .collect();
+        Footprints {
+            positions,
+            ..Footprints::of_luma(basis.width, basis.height, luma)
+        }
     }
 
-    /// The footprints of per-light luminance images `luma` (`width x height` each, light
-    /// after light).
+    /// The footprints of luminance images `luma` (`width x height` each, one after the
+    /// other), each a fixed light's.
     fn of_luma(width: usize, height: usize, luma: Vec<f32>) -> Footprints {
         let pixels = width * height;
         let lights = luma.len().checked_div(pixels).unwrap_or(0);
@@ -68,16 +94,50 @@ impl Footprints {
         Footprints {
             width,
             height,
+            positions: vec![Vec::new(); lights],
             luma,
             counts,
         }
     }
 
-    fn lights(&self) -> usize {
+    fn images(&self) -> usize {
         self.luma
             .len()
             .checked_div(self.width * self.height)
             .unwrap_or(0)
+    }
+
+    /// Per light, a value of each of its images (`per_image`): a fixed light's one, and
+    /// for a mover `fold` over its positions'.
+    fn per_light<T: Copy>(&self, per_image: &[T], fold: impl Fn(&[T]) -> T) -> Vec<T> {
+        self.positions
+            .iter()
+            .enumerate()
+            .map(|(l, held)| match held.as_slice() {
+                [] => per_image[l],
+                held => fold(&held.iter().map(|&(_, i)| per_image[i]).collect::<Vec<T>>()),
+            })
+            .collect()
+    }
+
+    /// Per light, per position (the scene's order; empty for a fixed light): its focus
+    /// palette, whether `region` selects the light in that position, and the light's
+    /// sensitivity there ([`Footprints::sensitivity`]).
+    pub fn positions(&self, region: Region) -> Vec<Vec<Reach>> {
+        let selected = self.select_images(region);
+        let sensitivity = self.sensitivity_images(region);
+        self.positions
+            .iter()
+            .map(|held| {
+                held.iter()
+                    .map(|&(palette, i)| Reach {
+                        palette,
+                        selected: selected[i],
+                        sensitivity: sensitivity[i],
+                    })
+                    .collect()
+            })
+            .collect()
     }
 
     fn light(&self, l: usize) -> &[f32] {
@@ -96,16 +156,21 @@ impl Footprints {
         [0, 1].map(|k| d[k] + a[k] - b[k] - c[k])
     }
 
-    /// The lights a region selects: any of the paper's three heuristics holds. The whole
-    /// stage selects every light.
+    /// The lights a region selects: any of the paper's three heuristics holds (for a
+    /// moving light, in any of its positions). The whole stage selects every light.
     pub fn select(&self, region: Region) -> Vec<bool> {
+        self.per_light(&self.select_images(region), |v| v.contains(&true))
+    }
+
+    /// [`Footprints::select`] per footprint image.
+    fn select_images(&self, region: Region) -> Vec<bool> {
         if region.is_full() {
-            return vec![true; self.lights()];
+            return vec![true; self.images()];
         }
         let (xs, ys) = region.pixel_spans(self.width, self.height);
         let area = (xs.len() * ys.len()).max(1) as f64;
         let all = (0..self.width, 0..self.height);
-        (0..self.lights())
+        (0..self.images())
             .map(|l| {
                 let [bright_in, high_in] = self.count(l, &xs, &ys).map(f64::from);
                 let [bright_all, high_all] = self.count(l, &all.0, &all.1).map(f64::from);
@@ -118,13 +183,19 @@ impl Footprints {
     }
 
     /// Per light, the mean luminance it adds inside the region per unit of intensity: the
-    /// "sensitivity" brightness normalisation divides by. Runs on every generate, so it sums
-    /// the region's row spans (a rectangle) in parallel instead of testing every pixel.
+    /// "sensitivity" brightness normalisation divides by (a moving light's in its first
+    /// position). Runs on every generate, so it sums the region's row spans (a rectangle)
+    /// in parallel instead of testing every pixel.
     pub fn sensitivity(&self, region: Region) -> Vec<f32> {
+        self.per_light(&self.sensitivity_images(region), |v| v[0])
+    }
+
+    /// [`Footprints::sensitivity`] per footprint image.
+    fn sensitivity_images(&self, region: Region) -> Vec<f32> {
         let w = self.width;
         let (xs, ys) = region.pixel_spans(w, self.height);
         let area = (xs.len() * ys.len()).max(1) as f64;
-        (0..self.lights())
+        (0..self.images())
             .into_par_iter()
             .map(|l| {
                 let light = self.light(l);
@@ -136,6 +207,17 @@ impl Footprints {
             })
             .collect()
     }
+}
+
+/// One position of a moving light as a region sees it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Reach {
+    /// Its focus palette.
+    pub palette: u32,
+    /// The region selects the light in this position.
+    pub selected: bool,
+    /// Mean luminance it adds in the region per unit of intensity, in this position.
+    pub sensitivity: f32,
 }
 
 /// Sum in eight independent lanes, so it vectorises (a single running f32 sum cannot).
@@ -182,7 +264,7 @@ mod tests {
             .map(|p| xs.contains(&(p % w)) && ys.contains(&(p / w)))
             .collect();
         let area = inside.iter().filter(|&&v| v).count().max(1) as f64;
-        (0..f.lights())
+        (0..f.positions.len())
             .map(|l| {
                 let [bright, highlight] = thresholds(f.light(l));
                 let (mut bright_in, mut bright_all, mut high_in, mut high_all) = (0, 0, 0, 0);

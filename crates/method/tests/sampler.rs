@@ -34,6 +34,7 @@ fn target(n: usize, mean: f32, key: f32, bright: f32) -> Target {
         area: 1.0,
         selected: vec![true; n],
         sensitivity: vec![1.0; n],
+        positions: vec![Vec::new(); n],
         mean,
         key,
         bright,

@@ -62,6 +62,7 @@ fn excluded_and_pinned_lights_keep_the_base_bit_for_bit_on_a_real_stage() {
         area: 1.0,
         selected: vec![true; 8],
         sensitivity: vec![1.0; 8],
+        positions: vec![Vec::new(); 8],
         mean: 0.5,
         key: 0.9,
         bright: 0.5,
