@@ -3,7 +3,7 @@
 
 use rosc::OscMessage;
 
-use super::{Context, int, int_arg, light_args, opt_int_arg};
+use super::{Context, int, int_arg, look_messages, opt_int_arg};
 use crate::engine::session::{Change, Session};
 use crate::engine::{Outcome, Refusal, gallery_sizes, msg};
 use crate::osc::args::Request;
@@ -104,9 +104,13 @@ impl Cmd {
             }
             Cmd::Candidate { k, m } => {
                 let look = s.gallery_look(k, m)?;
-                let mut a = vec![int(k), int(m)];
-                a.extend(light_args(scene, &look));
-                Ok(Outcome::reply(msg("/vo/candidate", a)))
+                let head = vec![int(k), int(m)];
+                Ok(Outcome::replies(look_messages(
+                    "/vo/candidate",
+                    head,
+                    scene,
+                    &look,
+                )))
             }
             Cmd::Gallery => Ok(Outcome::reply(gallery_sizes(s))),
         })

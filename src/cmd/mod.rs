@@ -381,6 +381,28 @@ fn light_args(scene: &Scene, look: &Look) -> Vec<OscType> {
         .collect()
 }
 
+/// A look as replies list it: `addr head... ch intensity r g b ...`, then, on a rig with
+/// moving lights, `addr/positions head... ch palette ...` (one pair per mover) so the
+/// per-light lists keep their shape.
+fn look_messages(addr: &str, head: Vec<OscType>, scene: &Scene, look: &Look) -> Vec<OscMessage> {
+    let mut levels = head.clone();
+    levels.extend(light_args(scene, look));
+    let mut out = vec![crate::engine::msg(addr, levels)];
+    if !scene.palettes.is_empty() {
+        let mut positions = head;
+        positions.extend(
+            scene
+                .lights
+                .iter()
+                .zip(&look.levels)
+                .filter_map(|(light, lv)| Some((light.channel, light.position_of(lv)?.palette)))
+                .flat_map(|(ch, n)| [OscType::Int(ch as i32), OscType::Int(n as i32)]),
+        );
+        out.push(crate::engine::msg(&format!("{addr}/positions"), positions));
+    }
+    out
+}
+
 fn one_light(channel: u32, lv: &visobjd_scene::look::Level) -> [OscType; 5] {
     [
         OscType::Int(channel as i32),

@@ -353,6 +353,8 @@ impl Status {
 pub struct Untouched {
     pub status: Status,
     pub live: Vec<LightLevel>,
+    /// `(ch, palette)` per moving light.
+    pub positions: Vec<(i32, i32)>,
     pub objectives: Vec<OscMessage>,
     pub looks: Vec<(i32, String)>,
 }
@@ -509,8 +511,30 @@ pub trait Osc {
     }
 
     fn live(&mut self) -> Vec<LightLevel> {
-        let m = self.ok("/vo/live", vec![], "/vo/live");
-        lights(&m.args)
+        self.live_aimed().0
+    }
+
+    /// `/vo/live`: the levels, and `(ch, palette)` per moving light from the
+    /// `/vo/live/positions` that follows it on a rig with movers (none on a rig without).
+    fn live_aimed(&mut self) -> (Vec<LightLevel>, Vec<(i32, i32)>) {
+        let mut got = self.call("/vo/live", vec![], "/vo/live");
+        let m = got.pop().expect("a reply");
+        assert_eq!(
+            (m.addr.as_str(), got.len()),
+            ("/vo/live", 0),
+            "{m:?} after {got:?}"
+        );
+        let rest = self.fence();
+        let positions = match rest.as_slice() {
+            [] => Vec::new(),
+            [p] if p.addr == "/vo/live/positions" && p.args.len() % 2 == 0 => p
+                .args
+                .chunks(2)
+                .map(|c| (num(&c[0]) as i32, num(&c[1]) as i32))
+                .collect(),
+            other => panic!("after /vo/live: {other:?}"),
+        };
+        (lights(&m.args), positions)
     }
 
     /// Gallery entry `k`, member `m`.
@@ -558,9 +582,11 @@ pub trait Osc {
     }
 
     fn snapshot(&mut self) -> Untouched {
+        let (live, positions) = self.live_aimed();
         Untouched {
             status: self.status(),
-            live: self.live(),
+            live,
+            positions,
             objectives: self.objectives(),
             looks: self.looks(),
         }

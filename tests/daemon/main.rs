@@ -25,6 +25,7 @@ mod daemon_hostile;
 mod daemon_live;
 mod daemon_looks;
 mod daemon_ma3;
+mod daemon_movers;
 mod daemon_objectives;
 mod daemon_peers;
 mod daemon_reload;
