@@ -137,6 +137,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             15.0,
         )
     });
+    rows.push(movers::row(&dir, &objective, reps * 2)?);
     rows.push(Row::at_most(
         format!("scene load, {} lights at {}x{}", BIG.0, BIG.1, BIG.2),
         load_s,
@@ -237,6 +238,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 }
 
 mod drag;
+mod movers;
 
 /// One line of the report.
 struct Row {
@@ -619,22 +621,27 @@ fn write_big_scene(dir: &Path) -> anyhow::Result<usize> {
     }
     std::fs::write(dir.join("scene.toml"), toml)?;
     (0..lights).into_par_iter().try_for_each(|i| {
-        let mut rng = Rng::seed_from_u64(i as u64);
-        let (cx, cy) = (
-            rng.random::<f32>() * w as f32,
-            rng.random::<f32>() * h as f32,
-        );
-        let radius = (0.05 + 0.2 * rng.random::<f32>()) * w as f32;
-        let tint: [f32; 3] = std::array::from_fn(|_| 0.3 + 0.7 * rng.random::<f32>());
-        let path = dir.join(format!("basis/{:03}.exr", i + 1));
-        exr::prelude::write_rgb_file(&path, w, h, |x, y| {
-            let d2 = ((x as f32 - cx).powi(2) + (y as f32 - cy).powi(2)) / (radius * radius);
-            let v = 0.01 + 0.5 * (-d2).exp();
-            (v * tint[0], v * tint[1], v * tint[2])
-        })
-        .with_context(|| format!("{}: cannot write", path.display()))
+        spot_image(&dir.join(format!("basis/{:03}.exr", i + 1)), w, h, i as u64)
     })?;
     Ok(lights)
+}
+
+/// Writes a smooth coloured spot over a dim wash, placed, sized and tinted by `seed`: a
+/// synthetic light's basis image.
+fn spot_image(path: &Path, w: usize, h: usize, seed: u64) -> anyhow::Result<()> {
+    let mut rng = Rng::seed_from_u64(seed);
+    let (cx, cy) = (
+        rng.random::<f32>() * w as f32,
+        rng.random::<f32>() * h as f32,
+    );
+    let radius = (0.05 + 0.2 * rng.random::<f32>()) * w as f32;
+    let tint: [f32; 3] = std::array::from_fn(|_| 0.3 + 0.7 * rng.random::<f32>());
+    exr::prelude::write_rgb_file(path, w, h, |x, y| {
+        let d2 = ((x as f32 - cx).powi(2) + (y as f32 - cy).powi(2)) / (radius * radius);
+        let v = 0.01 + 0.5 * (-d2).exp();
+        (v * tint[0], v * tint[1], v * tint[2])
+    })
+    .with_context(|| format!("{}: cannot write", path.display()))
 }
 
 /// Runs back-to-back generates for `seconds` while an `Output` sends the scene's universes
