@@ -288,7 +288,7 @@ fn import_rig(
     }
     for p in palettes {
         println!(
-            "focus palette {}{}: channels {}{}",
+            "focus palette {}{}: {}{}",
             p.number,
             Some(&p.label)
                 .filter(|l| !l.is_empty())

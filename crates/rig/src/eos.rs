@@ -938,5 +938,21 @@ mod tests {
         .unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(g.channels, [1, 2, 3, 200]);
         assert_eq!(g.label, "My Group");
+        let fp = |number: &str| {
+            palette_entry(
+                number,
+                &[Arg::Int(0), Arg::Str("U".into()), Arg::Str(" DS ".into())],
+                &[
+                    Arg::Int(0),
+                    Arg::Str("U".into()),
+                    Arg::Str("101-103".into()),
+                ],
+            )
+            .unwrap_or_else(|e| panic!("{e}"))
+        };
+        assert_eq!((fp("3").label.as_str(), fp("3").whole()), ("DS", Some(3)));
+        assert_eq!(fp("3").channels, [101, 102, 103]);
+        assert_eq!(fp("2.5").whole(), None);
+        assert_eq!(fp("10000").whole(), None);
     }
 }
