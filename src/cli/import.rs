@@ -7,11 +7,12 @@
 
 mod eos;
 
-use std::collections::BTreeSet;
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use anyhow::{Context, bail};
+use visobjd_rig::eos::EosPalette;
 use visobjd_rig::{FixtureType, Kind, Library, Rig};
 use visobjd_scene::profile::{Profile, ProfileFile};
 use visobjd_scene::{GroupFile, LightFile, Scene, SceneFile};
@@ -56,11 +57,25 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         };
         let library = library(args.fixtures.as_deref())?;
         let quiet = Duration::from_secs_f64(args.timeout);
-        let patch = eos::read(&args.source, &addr, framing, quiet)?;
-        let rig = patch.to_rig(&library);
+        let console = eos::read(&args.source, &addr, framing, quiet)?;
+        let rig = console.patch.to_rig(&library);
         rig.check(&args.source)?;
         let host = addr.rsplit_once(':').map_or(addr.as_str(), |(h, _)| h);
-        return import_rig(&args.source, &format!("eos {host}"), &rig, out, args.prune);
+        let palettes = match console.palettes {
+            Ok(p) => p,
+            Err(why) => {
+                println!("focus palettes not read: {why} (the patch is imported without them)");
+                Vec::new()
+            }
+        };
+        return import_rig(
+            &args.source,
+            &format!("eos {host}"),
+            &rig,
+            &palettes,
+            out,
+            args.prune,
+        );
     }
     let path = PathBuf::from(&args.source);
     let bytes =
@@ -83,7 +98,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             let Some(out) = &args.out else {
                 bail!("{file}: an MVR becomes a scene: give --out SCENE_DIR");
             };
-            import_rig(&file, &stem, &rig, out, args.prune)
+            import_rig(&file, &stem, &rig, &[], out, args.prune)
         }
         Kind::EosCsv => {
             let Some(out) = &args.out else {
@@ -92,7 +107,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             let patch = visobjd_rig::eos::parse_csv(&file, &bytes)?;
             let rig = patch.to_rig(&library(args.fixtures.as_deref())?);
             rig.check(&file)?;
-            import_rig(&file, &stem, &rig, out, args.prune)
+            import_rig(&file, &stem, &rig, &[], out, args.prune)
         }
         Kind::Gdtf => {
             let ty = visobjd_rig::gdtf::GdtfType::parse(&file, &bytes)?;
@@ -210,10 +225,19 @@ fn basis_path(channel: u32) -> String {
     format!("basis/{channel:03}.exr")
 }
 
-/// Builds or updates the scene in `out` from `rig` (`name`: the name a new scene gets).
-fn import_rig(file: &str, name: &str, rig: &Rig, out: &Path, prune: bool) -> anyhow::Result<()> {
+/// Builds or updates the scene in `out` from `rig` (`name`: the name a new scene gets),
+/// its positions named after the console's focus palettes (`palettes`, from `eos://`).
+fn import_rig(
+    file: &str,
+    name: &str,
+    rig: &Rig,
+    palettes: &[EosPalette],
+    out: &Path,
+    prune: bool,
+) -> anyhow::Result<()> {
     let old = existing(out)?;
-    let scene = merge(rig, name, old.as_ref(), prune);
+    let mut scene = merge(rig, name, old.as_ref(), prune);
+    let named = name_positions(&mut scene.file, palettes);
     let lights = scene.file.light.len();
     if lights == 0 {
         let mut why = rig.needs_profiles();
@@ -262,6 +286,27 @@ fn import_rig(file: &str, name: &str, rig: &Rig, out: &Path, prune: bool) -> any
             visobjd_rig::channel_list(&scene.dropped)
         );
     }
+    for p in palettes {
+        println!(
+            "focus palette {}{}: {}{}",
+            p.number,
+            Some(&p.label)
+                .filter(|l| !l.is_empty())
+                .map_or(String::new(), |l| format!(" \"{l}\"")),
+            visobjd_rig::channel_list(&p.channels),
+            if p.whole().is_none() {
+                " (not a whole number: a scene position cannot take it)"
+            } else {
+                ""
+            }
+        );
+    }
+    if !named.is_empty() {
+        println!(
+            "positions named after the console's palettes: {}",
+            visobjd_rig::channel_list(&named)
+        );
+    }
     for s in &rig.skipped {
         println!("not a light: {s}");
     }
@@ -269,6 +314,31 @@ fn import_rig(file: &str, name: &str, rig: &Rig, out: &Path, prune: bool) -> any
         println!("{n}");
     }
     Ok(())
+}
+
+/// Names every light's position `n` after the console's focus palette `n` (its label;
+/// pan, tilt and basis stay), so learned and imported palettes share the console's
+/// names; returns the channels whose positions were named.
+fn name_positions(file: &mut SceneFile, palettes: &[EosPalette]) -> Vec<u32> {
+    let labels: BTreeMap<u32, &str> = palettes
+        .iter()
+        .filter(|p| !p.label.is_empty())
+        .filter_map(|p| Some((p.whole()?, p.label.as_str())))
+        .collect();
+    let mut named = Vec::new();
+    for l in &mut file.light {
+        let mut any = false;
+        for p in &mut l.positions {
+            if let Some(label) = labels.get(&p.palette) {
+                p.name = Some((*label).to_string());
+                any = true;
+            }
+        }
+        if any {
+            named.push(l.channel);
+        }
+    }
+    named
 }
 
 /// A merged scene and what the merge did.

@@ -5,13 +5,15 @@
 //! export runs at a time: Eos's answers over UDP come through the OSC port
 //! ([`Engine::eos_heard`]) and go to the export waiting for them.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::sync::mpsc::{self, Sender};
 use std::sync::{Arc, Mutex};
+use std::time::Duration;
 
 use rosc::{OscMessage, OscType};
 
 use super::{Engine, Later, Refusal, msg};
+use crate::eos::EosConfig;
 use crate::eos::commands::{Cue, cue_commands, preset_commands};
 use crate::eos::record::{Channel, Record, Target};
 use crate::ma3::commands::{Target as Ma3Target, store_commands};
@@ -43,7 +45,8 @@ impl Engine {
                 "no Eos console is configured: set [eos] address (and protocol) in the config",
             )
         })?;
-        let records = self.eos_records(what)?;
+        let stage = self.stage();
+        let (pending, fade_s) = self.eos_records(what)?;
         let (tx, heard) = mpsc::channel();
         {
             let mut waiting = self.eos_answers.lock().unwrap_or_else(|p| p.into_inner());
@@ -57,6 +60,11 @@ impl Engine {
         let waiting = Arc::clone(&self.eos_answers);
         let started = self.threads.spawn("eos", move || {
             let result = Channel::open(&config, to, heard).and_then(|mut channel| {
+                let console = console_palettes(&stage.scene, &config, &mut channel);
+                let records: Vec<(Record, OscMessage)> = pending
+                    .into_iter()
+                    .map(|(p, reply)| (p.record(&stage.scene, fade_s, &console), reply))
+                    .collect();
                 let mut replies = Vec::with_capacity(records.len());
                 for (record, reply) in &records {
                     if let Err(e) = channel.record(&config, record) {
@@ -127,8 +135,9 @@ impl Engine {
         }
     }
 
-    /// The records `what` asks for, each with the reply that says it was confirmed.
-    fn eos_records(&self, what: EosRecord) -> Result<Vec<(Record, OscMessage)>, Refusal> {
+    /// The records `what` asks for, each with the reply that says it was confirmed, and
+    /// the session's fade (a cue's time).
+    fn eos_records(&self, what: EosRecord) -> Result<(Vec<(Pending, OscMessage)>, f32), Refusal> {
         let stage = self.stage();
         let scene = &stage.scene;
         let s = self.session();
@@ -141,19 +150,19 @@ impl Engine {
                 ],
             )
         };
-        let cue = |cue: Cue, look: &Look, label: Option<String>| {
+        let cue = |cue: Cue, look: Look, label: Option<String>| {
             (
-                Record {
-                    commands: cue_commands(scene, look, cue, s.fade_s, label.as_deref()),
+                Pending {
+                    look,
                     target: Target::Cue(cue, label),
                 },
                 cue_reply(cue),
             )
         };
-        Ok(match what {
+        let pending = match what {
             EosRecord::Preset(n) => vec![(
-                Record {
-                    commands: preset_commands(scene, &s.live, n),
+                Pending {
+                    look: s.live.clone(),
                     target: Target::Preset(n),
                 },
                 msg(
@@ -166,7 +175,7 @@ impl Engine {
             )],
             EosRecord::Cue { cue: c, label } => {
                 let label = label.or_else(|| saved_label(scene, &s.looks, &s.live));
-                vec![cue(c, &s.live, label)]
+                vec![cue(c, s.live.clone(), label)]
             }
             EosRecord::Cues { first } => {
                 if s.looks.is_empty() {
@@ -183,11 +192,54 @@ impl Engine {
                         ))
                     })?;
                     let (look, _) = file.fit(scene);
-                    records.push(cue(c, &look, Some(file.label.clone())));
+                    records.push(cue(c, look, Some(file.label.clone())));
                 }
                 records
             }
-        })
+        };
+        Ok((pending, s.fade_s))
+    }
+}
+
+/// A record still to be written: its command lines wait for the focus palettes the
+/// console has, asked over the export's own connection.
+struct Pending {
+    look: Look,
+    target: Target,
+}
+
+impl Pending {
+    /// The record's command lines, `console` being the console's focus palettes.
+    fn record(self, scene: &Scene, fade_s: f32, console: &BTreeSet<u32>) -> Record {
+        let commands = match &self.target {
+            Target::Preset(n) => preset_commands(scene, &self.look, *n, console),
+            Target::Cue(cue, label) => {
+                cue_commands(scene, &self.look, *cue, fade_s, label.as_deref(), console)
+            }
+        };
+        Record {
+            commands,
+            target: self.target,
+        }
+    }
+}
+
+/// The focus palettes the console has, asked only when the scene has moving lights. A
+/// console that does not say counts as having none: every position then goes as pan and
+/// tilt, which is right on any console (docs/eos.md).
+fn console_palettes(scene: &Scene, config: &EosConfig, channel: &mut Channel) -> BTreeSet<u32> {
+    if !scene.lights.iter().any(|l| l.is_moving()) {
+        return BTreeSet::new();
+    }
+    let quiet = Duration::from_secs_f64(config.timeout_s);
+    match crate::eos::palettes::read(channel, quiet) {
+        Ok(palettes) => crate::eos::palettes::numbers(&palettes),
+        Err(e) => {
+            tracing::warn!(
+                "Eos export: the console's focus palettes: {e}; positions go as pan and tilt"
+            );
+            BTreeSet::new()
+        }
     }
 }
 

@@ -5,6 +5,10 @@
 //! Chan 12 At 62.375 Enter                   intensity, percent (16-bit: three decimals)
 //! Chan 3 At 05 Enter                        under 10 %: a leading zero (Eos reads `At 5` as 50 %)
 //! Chan 12 Red 100 Green 21.6 Blue 0 White 05.1 Enter   every colour parameter the patch drives
+//! Chan 7 Focus_Palette 3 Enter              a mover's position: the focus palette, where
+//!                                           the console has it (OSC's `_` for the space),
+//! Chan 7 Pan -12.5 Tilt 41 Enter            else pan and tilt in degrees from centre
+//! Chan 8 Pan 05 Tilt -07.25 Enter           (a one-digit whole part: a leading zero)
 //! Chan 1 Thru 44 Record Preset 5 Enter      the lights of the look, recorded as a preset
 //! Chan 1 Thru 44 Record Cue 2/7 Enter       ... or as a cue, then its time and label:
 //! Cue 2/7 Time 3 Enter
@@ -12,14 +16,18 @@
 //! ```
 //!
 //! The levels are the DMX output's own ([`Patch::light_slots`] at master 1), so recalling
-//! the preset or cue puts the same slots on the wire as visobjd did.
+//! the preset or cue puts the same slots on the wire as visobjd did. A position is the
+//! scene's (`[[light.position]]` pan and tilt, degrees from the centre of the profile's
+//! range, as Eos shows them); which palettes the console has is asked before recording
+//! ([`super::palettes`]).
 
+use std::collections::BTreeSet;
 use std::fmt;
 
 use visobjd_dmx::patch::Patch;
-use visobjd_scene::Scene;
-use visobjd_scene::look::Look;
+use visobjd_scene::look::{Level, Look};
 use visobjd_scene::profile::Slot;
+use visobjd_scene::{Light, Scene};
 
 /// The longest label sent to Eos (a look's label is at most as long).
 pub const MAX_LABEL: usize = 100;
@@ -85,20 +93,37 @@ fn parameter(slot: Slot) -> Option<&'static str> {
         Slot::Intensity | Slot::Intensity16 | Slot::Uv | Slot::Fixed(_) | Slot::Emitter(_) => {
             return None;
         }
-        // A mover's position goes as its focus palette, or as pan and tilt in degrees
-        // (docs/eos.md), not as a percentage of the slot.
+        // A mover's position goes as a whole ([`position_line`]), not slot by slot.
         Slot::Pan | Slot::Pan16 | Slot::Tilt | Slot::Tilt16 => return None,
     })
 }
 
+/// The command line that puts a moving light in the position `level` gives it: its focus
+/// palette if the console has it (`console`: the palette numbers it has), else its pan and
+/// tilt in degrees ([`degrees`]). None for a fixed light.
+fn position_line(light: &Light, level: &Level, console: &BTreeSet<u32>) -> Option<String> {
+    let p = light.position_of(level)?;
+    let ch = light.channel;
+    Some(if console.contains(&p.palette) {
+        format!("Chan {ch} Focus_Palette {} Enter", p.palette)
+    } else {
+        format!(
+            "Chan {ch} Pan {} Tilt {} Enter",
+            degrees(p.pan),
+            degrees(p.tilt)
+        )
+    })
+}
+
 /// The command lines that put `look` on Eos: per light its intensity (`At 100` for a
-/// light without a dimmer, whose emitters carry its intensity) and every colour
-/// parameter its profile drives, at the levels the DMX output sends at master 1.
-fn look_lines(scene: &Scene, look: &Look) -> Vec<String> {
+/// light without a dimmer, whose emitters carry its intensity), every colour parameter
+/// its profile drives, at the levels the DMX output sends at master 1, and a mover's
+/// position ([`position_line`]).
+fn look_lines(scene: &Scene, look: &Look, console: &BTreeSet<u32>) -> Vec<String> {
     let patch = Patch::new(scene);
     let slots = patch.light_slots(&patch.unmastered(look));
-    let mut cmds = Vec::with_capacity(scene.lights.len() * 2 + 3);
-    for (light, slots) in scene.lights.iter().zip(&slots) {
+    let mut cmds = Vec::with_capacity(scene.lights.len() * 3 + 3);
+    for ((light, slots), level) in scene.lights.iter().zip(&slots).zip(&look.levels) {
         let ch = light.channel;
         let dimmer = slots.iter().find_map(|&(s, v)| match s {
             Slot::Intensity => Some(percent(v, 1)),
@@ -117,6 +142,7 @@ fn look_lines(scene: &Scene, look: &Look) -> Vec<String> {
         if !colour.is_empty() {
             cmds.push(format!("Chan {ch} {} Enter", colour.join(" ")));
         }
+        cmds.extend(position_line(light, level, console));
     }
     cmds
 }
@@ -127,9 +153,10 @@ fn all_channels(scene: &Scene) -> String {
     channel_list(&channels)
 }
 
-/// The command lines that put `look` on Eos and record it as preset `n`.
-pub fn preset_commands(scene: &Scene, look: &Look, n: u32) -> Vec<String> {
-    let mut cmds = look_lines(scene, look);
+/// The command lines that put `look` on Eos and record it as preset `n`; `console`: the
+/// focus palettes the console has.
+pub fn preset_commands(scene: &Scene, look: &Look, n: u32, console: &BTreeSet<u32>) -> Vec<String> {
+    let mut cmds = look_lines(scene, look, console);
     cmds.push(format!(
         "Chan {} Record Preset {n} Enter",
         all_channels(scene)
@@ -138,15 +165,17 @@ pub fn preset_commands(scene: &Scene, look: &Look, n: u32) -> Vec<String> {
 }
 
 /// The command lines that put `look` on Eos, record it as `cue`, and give the cue its
-/// time (`time_s`, the session's fade) and, if any, a label.
+/// time (`time_s`, the session's fade) and, if any, a label; `console`: the focus
+/// palettes the console has.
 pub fn cue_commands(
     scene: &Scene,
     look: &Look,
     cue: Cue,
     time_s: f32,
     label: Option<&str>,
+    console: &BTreeSet<u32>,
 ) -> Vec<String> {
-    let mut cmds = look_lines(scene, look);
+    let mut cmds = look_lines(scene, look, console);
     cmds.push(format!(
         "Chan {} Record Cue {cue} Enter",
         all_channels(scene)
@@ -188,7 +217,24 @@ pub fn trimmed(v: f64, decimals: usize) -> String {
 /// single digit as tens (`At 5` is 50 %), so a level under 10 % gets a leading zero
 /// (`05`, `07.5`); 0 is 0 either way.
 pub fn percent(v: f32, decimals: usize) -> String {
-    let p = trimmed(f64::from(v.clamp(0.0, 1.0)) * 100.0, decimals);
+    two_digits(trimmed(f64::from(v.clamp(0.0, 1.0)) * 100.0, decimals))
+}
+
+/// Pan or tilt in degrees as Eos takes them: at most three decimals (a 16-bit step of
+/// 540 degrees is 0.008), and a leading zero on a one-digit whole part (`05`, `-07.5`),
+/// as levels have: should Eos read a single digit as tens there too, `05` is 5 either way.
+pub fn degrees(v: f64) -> String {
+    let d = two_digits(trimmed(v.abs(), 3));
+    if v < 0.0 && d != "0" {
+        format!("-{d}")
+    } else {
+        d
+    }
+}
+
+/// A non-negative number as typed (`5`, `7.5`) with a leading zero on a one-digit whole
+/// part (`05`, `07.5`); 0 stays 0.
+fn two_digits(p: String) -> String {
     if p != "0" && p.split('.').next().is_some_and(|whole| whole.len() == 1) {
         format!("0{p}")
     } else {
@@ -236,6 +282,17 @@ mod tests {
         assert_eq!(percent(0.1, 1), "10");
         assert_eq!(percent(1.0 / 255.0, 1), "00.4");
         assert_eq!(percent(0.0001, 1), "0");
+    }
+
+    #[test]
+    fn degrees_have_three_decimals_and_two_whole_digits() {
+        assert_eq!(degrees(-12.5), "-12.5");
+        assert_eq!(degrees(5.0), "05");
+        assert_eq!(degrees(-7.25), "-07.25");
+        assert_eq!(degrees(0.0), "0");
+        assert_eq!(degrees(-0.0001), "0");
+        assert_eq!(degrees(269.99999), "270");
+        assert_eq!(degrees(0.0083), "00.008");
     }
 
     #[test]

@@ -8,7 +8,8 @@ use std::io::{Read, Write};
 use std::net::{SocketAddr, TcpStream};
 use std::time::{Duration, Instant};
 
-use rosc::{OscMessage, OscPacket};
+use rosc::{OscMessage, OscPacket, OscType};
+use visobjd_rig::eos::Arg;
 
 use crate::osc::framing::{self, Decoder, Framing, StreamFrame};
 use crate::osc::packet;
@@ -109,4 +110,26 @@ pub fn packets(messages: &[OscMessage]) -> Result<Vec<Vec<u8>>, String> {
                 .map_err(|e| format!("cannot encode {}: {e}", m.addr))
         })
         .collect()
+}
+
+/// An OSC argument as the rig crate's Eos replies take it.
+pub fn arg(a: &OscType) -> Arg {
+    match a {
+        OscType::Int(i) => Arg::Int(i64::from(*i)),
+        OscType::Long(i) => Arg::Int(*i),
+        OscType::Float(f) => Arg::Float(f64::from(*f)),
+        OscType::Double(d) => Arg::Float(*d),
+        OscType::String(s) => Arg::Str(s.clone()),
+        other => Arg::Str(format!("{other:?}")),
+    }
+}
+
+impl super::palettes::Exchange for Link {
+    fn send(&mut self, messages: &[OscMessage]) -> Result<(), String> {
+        Link::send(self, messages)
+    }
+
+    fn next(&mut self, deadline: Instant) -> Result<Option<OscMessage>, String> {
+        Link::next(self, deadline)
+    }
 }

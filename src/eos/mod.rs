@@ -10,6 +10,7 @@
 
 pub mod commands;
 pub mod link;
+pub mod palettes;
 pub mod record;
 
 use std::net::SocketAddr;

@@ -186,6 +186,16 @@ impl Channel {
     }
 }
 
+impl super::palettes::Exchange for Channel {
+    fn send(&mut self, messages: &[OscMessage]) -> Result<(), String> {
+        Channel::send(self, messages)
+    }
+
+    fn next(&mut self, deadline: Instant) -> Result<Option<OscMessage>, String> {
+        Channel::next(self, deadline)
+    }
+}
+
 /// The text of a command line echo that reports an error, None for any other echo. Eos
 /// writes the mode, then `Error:` and why, on the command line of a command it refused
 /// (`LIVE: Error: Cue List Does Not Exist`); a label that merely holds the word is not one.

@@ -5,6 +5,7 @@
 //! Fixture 12 Attribute "Dimmer" At 62.4
 //! Fixture 12 Attribute "ColorAdd_R" At 100
 //! Fixture 12 Attribute "ColorAdd_W" At 5.1
+//! Fixture 7 At Preset 2.3                   a mover's position: its Position preset
 //! Fixture 1 Thru 44
 //! Store Preset 21.5 /Overwrite              or: Store Sequence 901 Cue 3 /Overwrite
 //! Label Preset 21.5 "Dusk"                      Label Sequence 901 Cue 3 "Dusk"
@@ -14,6 +15,9 @@
 //!
 //! The levels are the DMX output's own ([`Patch::light_slots`] at master 1). MA3 fixture
 //! IDs are the lights' `ma3_id`, by default their channel numbers (an MVR's `FixtureID`).
+//! A moving light's position is its palette's preset in pool 2 (MA3's Position presets):
+//! MA3 answers nothing over OSC, so which presets the desk has cannot be asked, and the
+//! scene's palette numbers are taken to be the desk's (docs/ma3.md).
 
 use std::fmt;
 
@@ -22,6 +26,9 @@ use visobjd_dmx::patch::Patch;
 use visobjd_scene::Scene;
 use visobjd_scene::look::Look;
 use visobjd_scene::profile::Slot;
+
+/// MA3's preset pool of Position presets.
+const POSITION_POOL: u32 = 2;
 
 /// Where a look is stored.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -85,7 +92,8 @@ fn attribute(slot: Slot) -> Option<&'static str> {
         Slot::Magenta => "ColorSub_M",
         Slot::Yellow => "ColorSub_Y",
         Slot::Uv | Slot::Fixed(_) | Slot::Emitter(_) => return None,
-        // A mover's position goes as its Position preset, not as a slot level.
+        // A mover's position goes as its Position preset (`store_commands`), not as a
+        // slot level.
         Slot::Pan | Slot::Pan16 | Slot::Tilt | Slot::Tilt16 => return None,
     })
 }
@@ -101,8 +109,8 @@ pub fn store_commands(
 ) -> Vec<String> {
     let patch = Patch::new(scene);
     let slots = patch.light_slots(&patch.unmastered(look));
-    let mut cmds = Vec::with_capacity(scene.lights.len() * 4 + 5);
-    for (light, slots) in scene.lights.iter().zip(&slots) {
+    let mut cmds = Vec::with_capacity(scene.lights.len() * 5 + 5);
+    for ((light, slots), level) in scene.lights.iter().zip(&slots).zip(&look.levels) {
         for &(slot, v) in slots {
             if let Some(a) = attribute(slot) {
                 let decimals = if slot == Slot::Intensity16 { 3 } else { 1 };
@@ -112,6 +120,12 @@ pub fn store_commands(
                     percent(v, decimals)
                 ));
             }
+        }
+        if let Some(p) = light.position_of(level) {
+            cmds.push(format!(
+                "Fixture {} At Preset {POSITION_POOL}.{}",
+                light.ma3_id, p.palette
+            ));
         }
     }
     let ids: Vec<u32> = scene.lights.iter().map(|l| l.ma3_id).collect();

@@ -869,6 +869,111 @@ fn an_eos_consoles_groups_become_the_scenes_groups() {
     assert!(light(&scene, 11).get("group").is_none());
 }
 
+/// The focus palettes the palette tests' console holds (`--fp`): two whole ones on the
+/// spots (channels 41 and 42), and a decimal one.
+const FOCUS_PALETTES: [&str; 6] = [
+    "--fp",
+    "3=DS centre=41-42",
+    "--fp",
+    "5=US wide=41",
+    "--fp",
+    "2.5=Half=42",
+];
+
+#[test]
+fn an_eos_consoles_focus_palettes_are_listed_and_name_the_scenes_positions() {
+    let Some(first) = FakeEos::start(&FOCUS_PALETTES) else {
+        return;
+    };
+    let dir = temp_dir("import-eos-palettes");
+    let out = dir.join("scene");
+    let import = |console: &FakeEos| {
+        stdout(&run(&[
+            "import",
+            &console.url("eos"),
+            "--out",
+            s(&out),
+            "--fixtures",
+            s(&fixtures()),
+        ]))
+    };
+    let printed = import(&first);
+    for want in [
+        "focus palette 3 \"DS centre\": channels 41-42",
+        "focus palette 5 \"US wide\": channel 41",
+        "focus palette 2.5 \"Half\": channel 42 (not a whole number",
+    ] {
+        assert!(printed.contains(want), "{want}: {printed}");
+    }
+    // The spots need a profile: the scene gets them by hand, as movers with positions,
+    // one the console has (3, under another name) and one it does not (7).
+    let toml = out.join("scene.toml");
+    let mut text = std::fs::read_to_string(&toml).expect("scene.toml");
+    text += "\n[[profile]]\nname = \"p18\"\nchannels = [\"intensity\", \"pan16\", \"tilt16\"]\n";
+    for (ch, address) in [(41, 1), (42, 43)] {
+        text += &format!(
+            "\n[[light]]\nchannel = {ch}\nprofile = \"p18\"\nuniverse = 3\naddress = {address}\n\
+             [[light.position]]\npalette = 3\nname = \"old\"\npan = -10.5\ntilt = 20\n\
+             basis = \"basis/{ch:03}-fp3.exr\"\n\
+             [[light.position]]\npalette = 7\nname = \"mine\"\npan = 1\ntilt = 2\n\
+             basis = \"basis/{ch:03}-fp7.exr\"\n"
+        );
+    }
+    std::fs::write(&toml, text).expect("scene.toml");
+    let Some(second) = FakeEos::start(&FOCUS_PALETTES) else {
+        return;
+    };
+    let printed = import(&second);
+    assert!(
+        printed.contains("positions named after the console's palettes: channels 41-42"),
+        "{printed}"
+    );
+    let scene = scene_toml(&out);
+    for ch in [41, 42] {
+        let positions = light(&scene, ch)["position"]
+            .as_array()
+            .expect("the positions are kept")
+            .clone();
+        let p = |k: usize, key: &str| positions[k][key].clone();
+        assert_eq!(p(0, "name").as_str(), Some("DS centre"));
+        // Pan, tilt and basis stay; palette 7 is not the console's and keeps its name.
+        assert_eq!(p(0, "pan").as_float(), Some(-10.5));
+        assert_eq!(p(0, "tilt").as_float(), Some(20.0));
+        assert_eq!(
+            p(0, "basis").as_str(),
+            Some(format!("basis/{ch:03}-fp3.exr").as_str())
+        );
+        assert_eq!(p(1, "name").as_str(), Some("mine"));
+    }
+}
+
+#[test]
+fn a_console_that_does_not_answer_about_palettes_still_gives_its_patch() {
+    let Some(console) = FakeEos::start(&["--fp", "3=DS centre=41", "--fp-silent"]) else {
+        return;
+    };
+    let dir = temp_dir("import-eos-palettes-silent");
+    let out = dir.join("scene");
+    let printed = stdout(&run(&[
+        "import",
+        &console.url("eos"),
+        "--out",
+        s(&out),
+        "--fixtures",
+        s(&fixtures()),
+        "--timeout",
+        "0.5",
+    ]));
+    assert!(
+        printed.contains(
+            "focus palettes not read: Eos did not answer within 0.5 s while reading the focus \
+             palette count (the patch is imported without them)"
+        ),
+        "{printed}"
+    );
+    assert_eq!(channels(&scene_toml(&out)), [1, 2, 11, 12, 21, 22, 31]);
+}
+
 #[test]
 fn a_console_that_stops_answering_is_an_error_that_writes_nothing() {
     let Some(console) = FakeEos::start(&["--hang-after", "3"]) else {

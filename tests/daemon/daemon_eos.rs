@@ -470,3 +470,160 @@ fn a_bad_eos_user_is_refused_at_start() {
     assert!(!out.status.success());
     assert!(err.contains("eos.user must be 1..=99"), "{err}");
 }
+
+/// The moving lights' scene: an irgb (channel 1) and two movers (7 and 8, intensity and
+/// 16-bit pan and tilt) whose first positions are palette 3 (light 7) and palette 5
+/// (light 8), written under `dir`.
+pub fn mover_scene(dir: &std::path::Path) -> PathBuf {
+    let lights: Vec<TestLight> = [(1, "irgb", 1), (7, "spot", 40), (8, "spot", 50)]
+        .into_iter()
+        .enumerate()
+        .map(|(i, (channel, profile, address))| TestLight {
+            channel,
+            group: None,
+            profile,
+            universe: 1,
+            address,
+            pixel: Box::new(move |x, _| if x / 16 == i { [0.5; 3] } else { [0.0; 3] }),
+        })
+        .collect();
+    let scene = write_scene(&dir.join("mover-scene"), 48, 20, &[], &lights);
+    let toml = scene.join("scene.toml");
+    let mut text = std::fs::read_to_string(&toml).unwrap();
+    for (ch, positions) in MOVERS {
+        let basis = format!("basis = \"basis/{ch:03}.exr\"\n");
+        let block = format!("channel = {ch}\n{basis}");
+        assert!(text.contains(&block), "{text}");
+        text = text.replacen(&block, &format!("channel = {ch}\n"), 1);
+        let address = format!("address = {}\n", if ch == 7 { 40 } else { 50 });
+        let mut tables = address.clone();
+        for (palette, name, pan, tilt) in positions {
+            tables += &format!(
+                "[[light.position]]\npalette = {palette}\nname = \"{name}\"\npan = {pan}\n\
+                 tilt = {tilt}\nbasis = \"basis/{ch:03}.exr\"\n"
+            );
+        }
+        let at = text.find(&format!("channel = {ch}\n")).unwrap();
+        let end = at + text[at..].find(&address).unwrap();
+        text.replace_range(end..end + address.len(), &tables);
+    }
+    text += "\n[[profile]]\nname = \"spot\"\nchannels = [\"intensity\", \"pan16\", \"tilt16\"]\n";
+    std::fs::write(&toml, text).unwrap();
+    scene
+}
+
+/// A position of a test mover: palette, name, pan, tilt.
+pub type TestPosition = (u32, &'static str, f64, f64);
+
+/// The movers of [`mover_scene`]: channel, then its positions.
+pub const MOVERS: [(u32, [TestPosition; 2]); 2] = [
+    (
+        7,
+        [(3, "DS centre", -12.5, 41.0), (5, "US wide", 30.0, -7.25)],
+    ),
+    (
+        8,
+        [(5, "US wide", 5.0, -7.25), (3, "DS centre", 60.0, 20.0)],
+    ),
+];
+
+/// A daemon on [`mover_scene`] with `extra` config, every light at half.
+pub fn mover_daemon(name: &str, extra: &str) -> Daemon {
+    let dir = temp_dir(&format!("{name}-scene"));
+    let mut d = Daemon::start_setup(
+        name,
+        Setup {
+            extra: extra.to_string(),
+            scene_from: Some(mover_scene(&dir)),
+            ..Setup::default()
+        },
+    );
+    for ch in [1, 7, 8] {
+        d.ok(
+            &format!("/vo/light/{ch}/intensity"),
+            vec![float(0.5)],
+            "/vo/light",
+        );
+    }
+    d
+}
+
+#[test]
+fn a_movers_position_is_its_focus_palette_where_the_console_has_it_and_pan_and_tilt_else() {
+    // The console has palette 3 (light 7's first position), not 5 (light 8's).
+    let Some(console) = FakeConsole::start(
+        "eos-movers",
+        &["--protocol", "tcp", "--fp", "3=DS centre=7-8"],
+    ) else {
+        return;
+    };
+    let extra = format!(
+        "\n[eos]\naddress = \"{}\"\nprotocol = \"tcp\"\n",
+        console.addr
+    );
+    let mut d = mover_daemon("eos-movers", &extra);
+    d.ok("/vo/eos/preset", vec![int(4)], "/vo/eos/preset");
+    let lines = console.lines(90);
+    assert!(
+        lines.iter().any(|l| l == "Chan 7 Focus_Palette 3 Enter"),
+        "{lines:?}"
+    );
+    // Pan 5 and tilt -7.25 with a leading zero on the one-digit whole part.
+    assert!(
+        lines.iter().any(|l| l == "Chan 8 Pan 05 Tilt -07.25 Enter"),
+        "{lines:?}"
+    );
+    assert!(
+        !lines.iter().any(|l| l.starts_with("Chan 1 Pan")),
+        "{lines:?}"
+    );
+    let stored = &console.state()["presets"]["4"]["levels"];
+    assert_eq!(stored["7"]["Focus_Palette"], 3.0, "{stored}");
+    assert_eq!(stored["7"].get("Pan"), None, "{stored}");
+    // What the console read back is the scene's position, in degrees.
+    let (_, positions) = MOVERS[1];
+    assert_eq!(
+        stored["8"]["Pan"].as_f64(),
+        Some(positions[0].2),
+        "{stored}"
+    );
+    assert_eq!(
+        stored["8"]["Tilt"].as_f64(),
+        Some(positions[0].3),
+        "{stored}"
+    );
+    assert_eq!(
+        stored["1"].get("Pan"),
+        None,
+        "a fixed light has no position: {stored}"
+    );
+}
+
+#[test]
+fn without_the_consoles_palettes_every_position_goes_as_pan_and_tilt() {
+    // The console has no focus palettes.
+    let Some(console) = FakeConsole::start("eos-movers-none", &["--protocol", "tcp"]) else {
+        return;
+    };
+    let extra = format!(
+        "\n[eos]\naddress = \"{}\"\nprotocol = \"tcp\"\n",
+        console.addr
+    );
+    let mut d = mover_daemon("eos-movers-none", &extra);
+    let r = d.ok("/vo/eos/cue", vec![int(1), int(2)], "/vo/eos/recorded");
+    assert_eq!(num(&r.args[1]), 2.0);
+    let lines = console.lines(90);
+    for want in [
+        "Chan 7 Pan -12.5 Tilt 41 Enter",
+        "Chan 8 Pan 05 Tilt -07.25 Enter",
+    ] {
+        assert!(lines.iter().any(|l| l == want), "{want}: {lines:?}");
+    }
+    assert!(
+        !lines.iter().any(|l| l.contains("Focus_Palette")),
+        "{lines:?}"
+    );
+    let stored = &console.state()["cues"]["1/2"]["levels"];
+    assert_eq!(stored["7"]["Pan"], -12.5, "{stored}");
+    assert_eq!(stored["7"]["Tilt"], 41.0, "{stored}");
+}

@@ -273,3 +273,35 @@ fn the_exported_plugin_stores_the_saved_looks_with_the_same_commands() {
     assert_eq!(live["cues"]["901/2"], plugin["cues"]["901/2"]);
     assert_stored_matches_the_wire(&d, &plugin["cues"]["901/2"]["values"]);
 }
+
+#[test]
+fn a_movers_position_reaches_the_desk_as_its_position_preset() {
+    let Some(desk) = FakeMa3::start("ma3-movers") else {
+        return;
+    };
+    let extra = format!("\n[ma3]\naddress = \"127.0.0.1:{}\"\n", desk.port);
+    let mut d = crate::daemon_eos::mover_daemon("ma3-movers", &extra);
+    let r = d.ok("/vo/ma3/preset", vec![string("21.2")], "/vo/ma3/sent");
+    let state = desk.state_after(num(&r.args[1]) as usize);
+    assert_eq!(state["errors"], serde_json::json!([]), "{state}");
+    let commands: Vec<&str> = state["commands"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|c| c.as_str())
+        .collect();
+    for want in ["Fixture 7 At Preset 2.3", "Fixture 8 At Preset 2.5"] {
+        assert!(commands.contains(&want), "{want}: {commands:?}");
+    }
+    let values = &state["presets"]["21.2"]["values"];
+    assert_eq!(values["7"]["Preset"], "2.3", "{values}");
+    assert_eq!(values["8"]["Preset"], "2.5", "{values}");
+    // A fixed light has no position; nothing of pan or tilt goes as an attribute.
+    assert_eq!(values["1"].get("Preset"), None, "{values}");
+    assert!(
+        !commands
+            .iter()
+            .any(|c| c.contains("\"Pan\"") || c.contains("\"Tilt\"")),
+        "{commands:?}"
+    );
+}

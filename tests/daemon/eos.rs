@@ -27,7 +27,7 @@ fn a_44_light_look_arrives_as_exact_command_lines() {
             position: None,
         };
     }
-    let lines = preset_commands(&scene, &look, 7);
+    let lines = preset_commands(&scene, &look, 7, &Default::default());
     let colour = (0..44).filter(|&i| scene.profile(i).has_colour()).count();
     assert_eq!(lines.len(), 44 + colour + 1);
     assert_eq!(lines[0], "Chan 1 At 0 Enter");

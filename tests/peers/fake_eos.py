@@ -11,6 +11,9 @@ It answers as ETC's "Eos Integration via OSC" (Eos 2.6; in ETCLabs' EosSyncLib) 
   /eos/get/group/index/<i>     -> /eos/out/get/group/<g>/list/0/3 (index, UID, label) and
                                   /eos/out/get/group/<g>/channels/list/<offset>/<total>
                                   (index, UID, channel ranges as strings)
+  /eos/get/fp/count            -> /eos/out/get/fp/count <n>
+  /eos/get/fp/index/<i>        -> the palette's list, channel list and by-type list
+                                  (osc_stream.palette_replies)
 Every patch reply and every group channel list is split over two messages by offset (the
 OSC list convention), with unsolicited /eos/out/ping and /eos/out/active/chan messages in
 between, as a console with OSC TX on sends them all the time.
@@ -21,12 +24,14 @@ console serves the same patch the CSV holds. Messages are built with python-osc;
 framing (OSC 1.0 length prefix, or SLIP with --slip) is osc_stream.py's.
 
 Usage: fake_eos.py --csv FILE [--group LABEL=1-2,11 ...] [--slip] [--hang-after N]
-                   [--groups-reported N] [--delay S]
+                   [--groups-reported N] [--delay S] [--fp N=LABEL=CHANNELS ...]
+                   [--fp-silent]
 Prints the port it listens on (127.0.0.1), then serves one connection.
 --hang-after N: answers N patch indexes, sends the first half of the next reply, then
 stays silent (the connection open) until the client goes away.
 --groups-reported N: answers the group count with N whatever groups it has.
 --delay S: waits S seconds before each patch reply (a console that answers, slowly).
+--fp-silent: answers nothing about focus palettes (the connection stays open).
 """
 
 import argparse
@@ -37,7 +42,7 @@ import time
 
 from pythonosc.osc_message import OscMessage
 
-from osc_stream import build, framed, frames
+from osc_stream import build, focus_palettes, framed, frames, palette_replies
 
 
 def absolute(text):
@@ -124,8 +129,11 @@ def main():
     ap.add_argument("--hang-after", type=int)
     ap.add_argument("--groups-reported", type=int)
     ap.add_argument("--delay", type=float, default=0.0)
+    ap.add_argument("--fp", action="append", default=[])
+    ap.add_argument("--fp-silent", action="store_true")
     a = ap.parse_args()
     parts = read_csv(a.csv)
+    palettes = focus_palettes(a.fp)
     groups = []
     for g in a.group:
         label, chans = g.split("=", 1)
@@ -167,6 +175,13 @@ def main():
             n = i + 1
             link.send("/eos/out/get/group/%d/list/0/3" % n, [i, uid(1000 + n), label])
             link.split("/eos/out/get/group/%d/channels" % n, [i, uid(1000 + n)] + chans, 2)
+        elif address == "/eos/get/fp/count" and not a.fp_silent:
+            link.send("/eos/out/get/fp/count", [len(palettes)])
+        elif address.startswith("/eos/get/fp/index/") and not a.fp_silent:
+            i = int(address.rsplit("/", 1)[1])
+            for reply, args in palette_replies(i, palettes[i]):
+                link.send(reply, args)
+                link.noise()
     conn.close()
     return 0
 

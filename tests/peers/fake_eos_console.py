@@ -17,6 +17,9 @@ Commands run (channel selections with Thru and +):
   Chan <sel> At <level>                      Eos reads a one-digit level as tens: At 5 is
                                              50 %, At 05 is 5 %; Full is 100
   Chan <sel> <Param> <level> [<Param> <level> ...]   Red, Green, ... (same reading)
+  Chan <sel> Pan <deg> Tilt <deg>            degrees, read as levels are (one digit: tens)
+  Chan <sel> Focus_Palette <n>               refused with "Focus Palette Does Not Exist"
+                                             for a palette it does not have (--fp)
   Chan <sel> Record Preset <n>               stores the selected channels' levels
   Chan <sel> Record Cue <list>/<cue>         refused with "Cue List Does Not Exist" for a
                                              list the console does not have (--lists)
@@ -29,7 +32,8 @@ or SLIP with --protocol tcp-slip) is osc_stream.py's. Over UDP (--protocol udp) 
 go to 127.0.0.1:--tx, as Eos sends to its OSC TX address, not back to the sender.
 
 Usage: fake_eos_console.py --protocol tcp|tcp-slip|udp [--tx PORT] [--port PORT]
-                           [--lists 1,2] [--silent] --state FILE
+                           [--lists 1,2] [--fp N=LABEL=CHANNELS ...] [--silent]
+                           --state FILE
 Prints the port it listens on (127.0.0.1; --port, or any), then serves until killed. After every
 command it writes the state (each user's command lines, presets, cues) to FILE as JSON
 (a temporary file renamed over it). --silent: takes everything, answers nothing.
@@ -45,14 +49,14 @@ import threading
 
 from pythonosc.osc_message import OscMessage
 
-from osc_stream import build, framed, frames, selection
+from osc_stream import build, focus_palettes, framed, frames, palette_replies, selection
 
 
 def level(text):
-    """A level typed on Eos's command line, in percent."""
+    """A level typed on Eos's command line, in percent (or degrees for pan and tilt)."""
     if text.lower() in ("full", "fl"):
         return 100.0
-    if re.fullmatch(r"[0-9]", text):
+    if re.fullmatch(r"-?[0-9]", text):
         return float(text) * 10.0
     return float(text)
 
@@ -63,8 +67,9 @@ def cue_key(text):
 
 
 class Console:
-    def __init__(self, lists, state):
+    def __init__(self, lists, palettes, state):
         self.lists = lists
+        self.palettes = palettes
         self.state_path = state
         self.lines = {}
         self.live = {}
@@ -93,6 +98,12 @@ class Console:
                     return "Cue List Does Not Exist"
                 self.cues[key] = {"label": "", "time": None,
                                   "levels": {str(c): dict(self.live.get(c, {})) for c in sel}}
+                return None
+            if tail[0] == "Focus_Palette" and len(tail) == 2:
+                if tail[1] not in [p[0] for p in self.palettes]:
+                    return "Focus Palette Does Not Exist"
+                for c in sel:
+                    self.live.setdefault(c, {})["Focus_Palette"] = float(tail[1])
                 return None
             if len(tail) % 2:
                 return "Syntax Error"
@@ -132,6 +143,13 @@ class Console:
             if n in self.presets:
                 answer("/eos/out/get/preset/%s/list/0/5" % n,
                        [0, "uid-p%s" % n, self.presets[n]["label"], 0, 0])
+        elif msg.address == "/eos/get/fp/count":
+            answer("/eos/out/get/fp/count", [len(self.palettes)])
+        elif msg.address.startswith("/eos/get/fp/index/"):
+            i = int(msg.address.rsplit("/", 1)[1])
+            if 0 <= i < len(self.palettes):
+                for address, args in palette_replies(i, self.palettes[i]):
+                    answer(address, args)
         elif msg.address.startswith("/eos/get/cue/"):
             key = cue_key("/".join(msg.address.split("/")[4:6]))
             if key in self.cues:
@@ -156,10 +174,11 @@ def main():
     ap.add_argument("--tx", type=int)
     ap.add_argument("--port", type=int, default=0)
     ap.add_argument("--lists", default="1")
+    ap.add_argument("--fp", action="append", default=[])
     ap.add_argument("--silent", action="store_true")
     ap.add_argument("--state", required=True)
     a = ap.parse_args()
-    console = Console({int(x) for x in a.lists.split(",") if x}, a.state)
+    console = Console({int(x) for x in a.lists.split(",") if x}, focus_palettes(a.fp), a.state)
     console.save()
 
     if a.protocol == "udp":

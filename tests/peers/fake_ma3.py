@@ -7,6 +7,8 @@ are not taken (MA3 does not read them): each one is recorded as an error.
 The commands it runs (MA3 syntax, keywords as MA3 writes them):
   Fixture <list>                              selects (1 Thru 4 + 7)
   Fixture <list> Attribute "<name>" At <v>    sets an attribute in percent (At 5 is 5 %)
+  Fixture <list> At Preset <pool>.<n>         puts a preset in the programmer (kept as
+                                              "Preset": "<pool>.<n>")
   Store Preset <pool>.<n> /Overwrite          stores the selection's programmer values
   Store Sequence <s> Cue <c> /Overwrite       likewise, as a cue
   Label Preset <pool>.<n> "<text>"            labels a stored preset
@@ -65,6 +67,15 @@ class Desk:
                     return False
                 for f in selection(w[1:i]):
                     self.programmer.setdefault(f, {})[w[i + 1]] = float(w[i + 3])
+                return True
+            if "At" in w:
+                i = w.index("At")
+                if w[i + 1:i + 2] != ["Preset"] or len(w) != i + 3:
+                    return False
+                if not re.fullmatch(r"\d+\.\d+", w[i + 2]):
+                    return False
+                for f in selection(w[1:i]):
+                    self.programmer.setdefault(f, {})["Preset"] = w[i + 2]
                 return True
             self.selection = selection(w[1:])
             return True

@@ -1,7 +1,8 @@
 """What the fake consoles share (tests/peers/fake_eos.py, fake_eos_console.py,
 fake_ma3.py): OSC messages built with python-osc, OSC over TCP framed as OSC 1.0 (a
 32-bit length prefix) or OSC 1.1 (SLIP, RFC 1055), written here from those specifications,
-and a console's channel selection (1 Thru 4 + 7)."""
+a console's channel selection (1 Thru 4 + 7), and Eos's focus palettes as its OSC
+answers them."""
 
 import struct
 
@@ -68,3 +69,28 @@ def selection(words):
             out.append(start)
             i += 1
     return out
+
+
+def focus_palettes(specs):
+    """Focus palettes from --fp NUMBER=LABEL=CHANNELS arguments (channels as Eos sends
+    them: 7-8,11), as (number, label, [channel strings]) in the given order."""
+    out = []
+    for spec in specs:
+        number, label, chans = spec.split("=", 2)
+        out.append((number, label, [c for c in chans.split(",") if c]))
+    return out
+
+
+def palette_replies(index, palette):
+    """What Eos answers /eos/get/fp/index/<i> (or /eos/get/fp/<n>) with, as the Eos manual
+    ("Integrating Your App with Eos") gives it: three OSC lists, the palette's (index, UID,
+    label, absolute, locked), its channels' (index, UID, channel ranges) and its by-type
+    channels' (index, UID, none here)."""
+    number, label, chans = palette
+    uid = "%08X-0000-0000-0000-00000000F%03d" % (index + 1, index)
+    base = "/eos/out/get/fp/%s" % number
+    return [
+        ("%s/list/0/5" % base, [index, uid, label, 0, 0]),
+        ("%s/channels/list/0/%d" % (base, 2 + len(chans)), [index, uid] + chans),
+        ("%s/byType/list/0/2" % base, [index, uid]),
+    ]

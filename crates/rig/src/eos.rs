@@ -23,6 +23,13 @@
 //! the offset of the message's first argument in the whole list and `<list count>` the
 //! whole list's length; Bitfocus Companion's Eos module reads the label at list position 2
 //! the same way (`get_list_param`).
+//!
+//! Focus palettes (the Eos manual's "Integrating Your App with Eos", `fp`): after
+//! `/eos/get/fp/count` (answered by `/eos/out/get/fp/count <n>`), `/eos/get/fp/index/<i>`
+//! is answered by three lists: `/eos/out/get/fp/<fp>/list/<i>/<n>` = index, UID, label,
+//! absolute, locked; `/eos/out/get/fp/<fp>/channels/list/<i>/<n>` = index, UID, then the
+//! member channels as for a group; and `.../byType/list/...` (the by-type channels, which
+//! the import does not use). No reply carries pan or tilt values.
 
 use std::collections::BTreeMap;
 
@@ -88,6 +95,29 @@ pub struct EosGroup {
     pub label: String,
     /// Its channels in order.
     pub channels: Vec<u32>,
+}
+
+/// A focus palette of the show file: the number a moving light's position takes
+/// (`[[light.position]] palette`), its label and its channels.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EosPalette {
+    /// Palette number as Eos spells it (`3`, `3.5`).
+    pub number: String,
+    /// Its label (may be empty).
+    pub label: String,
+    /// The channels it holds data for, in order.
+    pub channels: Vec<u32>,
+}
+
+impl EosPalette {
+    /// The number as a scene's palette number (a whole 1..=9999), None for a decimal one
+    /// (Eos allows `3.5`; a scene does not).
+    pub fn whole(&self) -> Option<u32> {
+        self.number
+            .parse()
+            .ok()
+            .filter(|n| (1..=visobjd_scene::MAX_PALETTE).contains(n))
+    }
 }
 
 /// A console's patch and groups, however they were read.
@@ -373,6 +403,17 @@ pub enum Reply {
     PatchCount,
     /// `/eos/out/get/group/count`.
     GroupCount,
+    /// `/eos/out/get/fp/count`.
+    PaletteCount,
+    /// A piece of a focus palette's list, of its channel list, or of its by-type list.
+    Palette {
+        /// The palette number as sent.
+        number: String,
+        /// Which of its three lists.
+        list: PaletteList,
+        /// The piece's place in the whole list.
+        piece: Piece,
+    },
     /// A piece of a patch list: `/eos/out/get/patch/<channel>/<part>/list/<offset>/<total>`.
     Patch {
         /// Channel.
@@ -393,6 +434,17 @@ pub enum Reply {
     },
     /// Anything else.
     Other,
+}
+
+/// Which of a focus palette's three replies a message is part of.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PaletteList {
+    /// `/list/...`: index, UID, label, absolute, locked.
+    Main,
+    /// `/channels/list/...`: index, UID, the member channels.
+    Channels,
+    /// `/byType/list/...`: index, UID, the by-type channels.
+    ByType,
 }
 
 /// Where a message's arguments sit in a list split over several messages.
@@ -442,6 +494,23 @@ pub fn reply(address: &str) -> Reply {
             },
             None => Reply::Other,
         },
+        ["eos", "out", "get", "fp", "count"] => Reply::PaletteCount,
+        ["eos", "out", "get", "fp", n, rest @ ..] => {
+            let (list, o, t) = match rest {
+                ["list", o, t] => (PaletteList::Main, o, t),
+                ["channels", "list", o, t] => (PaletteList::Channels, o, t),
+                ["byType", "list", o, t] => (PaletteList::ByType, o, t),
+                _ => return Reply::Other,
+            };
+            match piece(o, t) {
+                Some(piece) => Reply::Palette {
+                    number: (*n).to_string(),
+                    list,
+                    piece,
+                },
+                None => Reply::Other,
+            }
+        }
         _ => Reply::Other,
     }
 }
@@ -493,6 +562,14 @@ impl Lists {
     }
 }
 
+/// The first argument of a list as a count or an index (a count reply's only argument, a
+/// list's index), None when it is not a non-negative whole number.
+pub fn first_number(list: &[Arg]) -> Option<usize> {
+    list.first()
+        .and_then(Arg::int)
+        .and_then(|i| usize::try_from(i).ok())
+}
+
 /// A whole patch list as a channel part (fields as in the module header).
 pub fn patch_entry(channel: u32, part: u32, list: &[Arg]) -> Result<EosChannel, String> {
     let text = |i: usize| list.get(i).map(Arg::text).unwrap_or_default();
@@ -530,22 +607,44 @@ pub fn patch_entry(channel: u32, part: u32, list: &[Arg]) -> Result<EosChannel, 
 
 /// A group from its list (label) and its channel list (`1-100`, `200`, or numbers).
 pub fn group_entry(number: &str, list: &[Arg], channels: &[Arg]) -> Result<EosGroup, String> {
+    let (label, channels) = label_and_channels(&format!("group {number}"), list, channels)?;
+    Ok(EosGroup {
+        number: number.to_string(),
+        label,
+        channels,
+    })
+}
+
+/// A focus palette from its list (label) and its channel list, read as a group's.
+pub fn palette_entry(number: &str, list: &[Arg], channels: &[Arg]) -> Result<EosPalette, String> {
+    let (label, channels) = label_and_channels(&format!("focus palette {number}"), list, channels)?;
+    Ok(EosPalette {
+        number: number.to_string(),
+        label,
+        channels,
+    })
+}
+
+/// The label of a target's list and the channels of its channel list (`what` names it in
+/// errors): groups and palettes answer alike.
+fn label_and_channels(
+    what: &str,
+    list: &[Arg],
+    channels: &[Arg],
+) -> Result<(String, Vec<u32>), String> {
     let mut out = Vec::new();
     for a in channels.iter().skip(field::GROUP_LABEL) {
         let parsed = crate::parse_channels(&a.text())
-            .map_err(|item| format!("group {number}: `{item}` is not a channel or a range"))?;
+            .map_err(|item| format!("{what}: `{item}` is not a channel or a range"))?;
         out.extend(parsed);
     }
-    Ok(EosGroup {
-        number: number.to_string(),
-        label: list
-            .get(field::GROUP_LABEL)
-            .map(Arg::text)
-            .unwrap_or_default()
-            .trim()
-            .to_string(),
-        channels: out,
-    })
+    let label = list
+        .get(field::GROUP_LABEL)
+        .map(Arg::text)
+        .unwrap_or_default()
+        .trim()
+        .to_string();
+    Ok((label, out))
 }
 
 impl EosPatch {
@@ -726,6 +825,26 @@ mod tests {
             reply("/eos/out/get/group/1.2/channels/list/2/5"),
             Reply::Group { channels: true, .. }
         ));
+        assert_eq!(reply("/eos/out/get/fp/count"), Reply::PaletteCount);
+        assert_eq!(
+            reply("/eos/out/get/fp/3/byType/list/0/2"),
+            Reply::Palette {
+                number: "3".into(),
+                list: PaletteList::ByType,
+                piece: Piece {
+                    offset: 0,
+                    total: 2
+                }
+            }
+        );
+        assert!(matches!(
+            reply("/eos/out/get/fp/3.5/channels/list/2/4"),
+            Reply::Palette {
+                list: PaletteList::Channels,
+                ..
+            }
+        ));
+        assert_eq!(reply("/eos/out/get/fp/3/notes"), Reply::Other);
         for other in [
             "/eos/out/ping",
             "/eos/out/active/chan",
@@ -819,5 +938,21 @@ mod tests {
         .unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(g.channels, [1, 2, 3, 200]);
         assert_eq!(g.label, "My Group");
+        let fp = |number: &str| {
+            palette_entry(
+                number,
+                &[Arg::Int(0), Arg::Str("U".into()), Arg::Str(" DS ".into())],
+                &[
+                    Arg::Int(0),
+                    Arg::Str("U".into()),
+                    Arg::Str("101-103".into()),
+                ],
+            )
+            .unwrap_or_else(|e| panic!("{e}"))
+        };
+        assert_eq!((fp("3").label.as_str(), fp("3").whole()), ("DS", Some(3)));
+        assert_eq!(fp("3").channels, [101, 102, 103]);
+        assert_eq!(fp("2.5").whole(), None);
+        assert_eq!(fp("10000").whole(), None);
     }
 }

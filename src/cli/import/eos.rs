@@ -6,7 +6,7 @@
 //! convention are the rig crate's `eos` module): `/eos/get/patch/count`, then
 //! `/eos/get/patch/index/<i>` for every index (positions in the patch list, one channel
 //! part each, as ETCLabs' EosSyncLib counts them), likewise `/eos/get/group/count` and
-//! `/eos/get/group/index/<i>`. Requests go out a window ahead of the answers; replies are
+//! `/eos/get/group/index/<i>`, then the focus palettes (`crate::eos::palettes`). Requests go out a window ahead of the answers; replies are
 //! matched by the index they carry (their first argument), not by arrival order. Everything else the
 //! console sends (pings, the active channel, the command line, notes, augment3d) is skipped.
 
@@ -15,10 +15,12 @@ use std::net::ToSocketAddrs;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
-use rosc::{OscMessage, OscType};
-use visobjd_rig::eos::{self, Arg, EosChannel, EosGroup, EosPatch, Lists, Piece, Reply};
+use rosc::OscMessage;
+use visobjd_rig::eos::{
+    self, Arg, EosChannel, EosGroup, EosPalette, EosPatch, Lists, Piece, Reply,
+};
 
-use crate::eos::link::Link;
+use crate::eos::link::{Link, arg};
 use crate::osc::framing::Framing;
 
 /// Eos's OSC TCP port for OSC 1.0 (length-prefixed) packets.
@@ -161,7 +163,7 @@ impl EosConnection<'_> {
             else {
                 continue;
             };
-            let Some(i) = index_of(&list).filter(|&i| i < n) else {
+            let Some(i) = eos::first_number(&list).filter(|&i| i < n) else {
                 bail!(
                     "{}: {}: the {kind} list's index is not one of 0..{n}",
                     self.source,
@@ -185,14 +187,8 @@ impl EosConnection<'_> {
             if eos::reply(&m.addr) != want {
                 continue;
             }
-            let n = m
-                .args
-                .first()
-                .map(arg)
-                .and_then(|a| match a {
-                    Arg::Int(n) => usize::try_from(n).ok(),
-                    _ => None,
-                })
+            let args: Vec<Arg> = m.args.iter().map(arg).collect();
+            let n = eos::first_number(&args)
                 .with_context(|| format!("{}: {} carries no count", self.source, m.addr))?;
             if n > eos::MAX_ENTRIES {
                 let what = if kind == "patch" {
@@ -211,32 +207,21 @@ impl EosConnection<'_> {
     }
 }
 
-fn arg(a: &OscType) -> Arg {
-    match a {
-        OscType::Int(i) => Arg::Int(i64::from(*i)),
-        OscType::Long(i) => Arg::Int(*i),
-        OscType::Float(f) => Arg::Float(f64::from(*f)),
-        OscType::Double(d) => Arg::Float(*d),
-        OscType::String(s) => Arg::Str(s.clone()),
-        other => Arg::Str(format!("{other:?}")),
-    }
+/// What a console holds: its patch and groups, and its focus palettes or why they could
+/// not be read (an import without them still imports the patch).
+pub struct Console {
+    pub patch: EosPatch,
+    pub palettes: Result<Vec<EosPalette>, String>,
 }
 
-/// The list index a whole reply carries (its first argument).
-fn index_of(list: &[Arg]) -> Option<usize> {
-    match list.first() {
-        Some(Arg::Int(i)) => usize::try_from(*i).ok(),
-        _ => None,
-    }
-}
-
-/// Reads the console's patch and groups. `quiet` is the longest the console may be silent.
+/// Reads the console's patch, groups and focus palettes. `quiet` is the longest the
+/// console may be silent.
 pub fn read(
     source: &str,
     addr: &str,
     framing: Framing,
     quiet: Duration,
-) -> anyhow::Result<EosPatch> {
+) -> anyhow::Result<Console> {
     let to = addr
         .to_socket_addrs()
         .with_context(|| format!("{source}: `{addr}` is not a HOST:PORT"))?
@@ -312,9 +297,13 @@ pub fn read(
                 .map_err(|e| anyhow::anyhow!("{source}: {e}"))?,
         );
     }
-    Ok(EosPatch {
-        channels: parts.into_values().collect(),
-        groups,
+    let palettes = crate::eos::palettes::read(&mut c.link, quiet);
+    Ok(Console {
+        patch: EosPatch {
+            channels: parts.into_values().collect(),
+            groups,
+        },
+        palettes,
     })
 }
 
