@@ -792,6 +792,10 @@ struct Plan<'a> {
     /// Per channel and block, and per chunk, the lights (numbered within the chunk) that
     /// contribute at all.
     active: Vec<Vec<Vec<u32>>>,
+    /// Per channel and chunk, the lights any block reads, when that is not all of them:
+    /// only these rows of a half-float chunk are widened (a mover holding many positions
+    /// leaves most of its images unread by a few thumbnails).
+    read: Vec<Vec<Option<Vec<u32>>>>,
 }
 
 impl<'a> Plan<'a> {
@@ -820,7 +824,7 @@ impl<'a> Plan<'a> {
                     .collect()
             })
             .collect();
-        let active = packed
+        let active: Vec<Vec<Vec<u32>>> = packed
             .iter()
             .map(|w| {
                 chunks
@@ -833,7 +837,27 @@ impl<'a> Plan<'a> {
                     .collect()
             })
             .collect();
+        let read = (0..3)
+            .map(|ch| {
+                chunks
+                    .iter()
+                    .enumerate()
+                    .map(|(k, c)| {
+                        let mut any = vec![false; c.len()];
+                        for blk in 0..blocks {
+                            for &l in &active[ch * blocks + blk][k] {
+                                any[l as usize] = true;
+                            }
+                        }
+                        let rows: Vec<u32> =
+                            (0..c.len() as u32).filter(|&l| any[l as usize]).collect();
+                        (rows.len() < c.len()).then_some(rows)
+                    })
+                    .collect()
+            })
+            .collect();
         Plan {
+            read,
             kernel,
             basis,
             blocks,
@@ -885,7 +909,16 @@ impl<'a> Plan<'a> {
                     Panel::Single(p) => &p.as_chunks().0[rows],
                     Panel::Half(p) => {
                         let dst = &mut Line::rows_mut(panel)[..range.len()];
-                        widen(kernel, &p[rows.start * STRIP..rows.end * STRIP], dst);
+                        match &self.read[ch][k] {
+                            None => widen(kernel, &p[rows.start * STRIP..rows.end * STRIP], dst),
+                            Some(read) => {
+                                for &l in read {
+                                    let at = (rows.start + l as usize) * STRIP;
+                                    let row = std::slice::from_mut(&mut dst[l as usize]);
+                                    widen(kernel, &p[at..at + STRIP], row);
+                                }
+                            }
+                        }
                         dst
                     }
                 };
@@ -1196,6 +1229,68 @@ mod tests {
             for (a, b) in a.iter().zip(&b) {
                 assert!((a - b).abs() <= 1e-3 * a.max(1.0), "{a} vs {b}");
             }
+        }
+    }
+
+    /// Four lights over the seven images of [`planes`]: light 1 a mover holding images 1
+    /// and 5, light 3 one holding 3, 4 and 6 (a mover's images are not contiguous), light
+    /// 2 a mover with one position. Every kernel, with the images in one chunk or cut
+    /// into several, renders what the reference does.
+    #[test]
+    fn movers_weigh_the_image_of_their_position_alone() {
+        let (w, h, images, planes) = planes();
+        let lights = 4;
+        for precision in [Precision::Single, Precision::Half] {
+            let mut basis = BasisImages::from_planes(w, h, images, &planes, precision);
+            basis.lights = lights;
+            basis.colours.truncate(lights);
+            basis.emitter_images.truncate(lights);
+            basis.positions = vec![Vec::new(); lights];
+            basis.positions[1] = vec![(10, 1), (20, 5)];
+            basis.positions[3] = vec![(1, 3), (2, 4), (3, 6)];
+            basis.positions[2] = vec![(7, 2)];
+            let mut looks = looks(lights);
+            for (k, look) in looks.iter_mut().enumerate() {
+                look.levels[1].position = [None, Some(20), Some(10), Some(99)][k % 4];
+                look.levels[3].position = Some(1 + (k as u32 * 7) % 3);
+                look.levels[2].position = Some(7);
+            }
+            looks[5].levels[3].intensity = 0.0;
+            let refs: Vec<&Look> = looks.iter().collect();
+            let wts = weights(&basis, &refs, 0.7);
+            for (name, kernel) in Kernel::all() {
+                let Some(kernel) = kernel else { continue };
+                for chunk in [CHUNK_LIGHTS, 3, 1] {
+                    let mut raw: Vec<Vec<f32>> =
+                        looks.iter().map(|_| vec![0.0; w * h * 3]).collect();
+                    composite_chunked(kernel, &basis, &wts, &mut raw, chunk, |rgb, out| {
+                        for (i, px) in out.chunks_exact_mut(3).enumerate() {
+                            px.copy_from_slice(&[rgb[0][i], rgb[1][i], rgb[2][i]]);
+                        }
+                    });
+                    for (k, look) in looks.iter().enumerate() {
+                        let want = render_reference(&basis, look, 0.7);
+                        for (i, &v) in want.iter().enumerate() {
+                            assert!(
+                                (raw[k][i] - v).abs() <= 1e-4 * v.max(1.0),
+                                "{name} {precision:?} chunk {chunk} look {k} sample {i}: {} vs {v}",
+                                raw[k][i]
+                            );
+                        }
+                    }
+                }
+            }
+            // The reference itself takes the position's image: palette 2 puts light 3
+            // on image 4.
+            let mut alone = Look::off(lights);
+            alone.levels[3] = Level {
+                intensity: 1.0,
+                color: [1.0; 3],
+                position: Some(2),
+            };
+            let got = render_reference(&basis, &alone, 1.0);
+            assert_eq!(got[0], basis.plane(0, 4)[0], "image 4's first red sample");
+            assert_ne!(basis.plane(0, 4)[0], basis.plane(0, 3)[0]);
         }
     }
 }
