@@ -531,6 +531,47 @@ fn a_fixture_type_lists_its_modes_and_adds_them_to_a_scene() {
     );
 }
 
+/// A published moving head (the Stairville MH-100 from the Open Fixture Library) is listed
+/// with its pan and tilt slots and travel, and its profiles go into scene.toml with the
+/// travel as `pan_range` and `tilt_range` (its `angleEnd`s, 630 and 220 degrees).
+#[test]
+fn a_moving_head_type_keeps_its_pan_and_tilt_travel() {
+    let dir = temp_dir("import-mover");
+    let mvr = dir.join("plot.mvr");
+    write_mvr(&mvr, &plot());
+    let scene = dir.join("scene");
+    stdout(&run(&["import", s(&mvr), "--out", s(&scene)]));
+    let mover = fixtures().join("stairville-mh-100.json");
+    let out = stdout(&run(&["import", s(&mover)]));
+    assert!(
+        out.contains("profile \"MH-100 (9-Channel)\": 9 slots: pan, tilt, fixed:0, intensity, red, green, blue, white, fixed:0; pan 630 and tilt 220 degrees of travel"),
+        "{out}"
+    );
+    assert!(
+        out.contains(
+            "profile \"MH-100 (14-Channel)\": 14 slots: pan16, tilt16, fixed:0, intensity,"
+        ),
+        "{out}"
+    );
+    stdout(&run(&["import", s(&mover), "--out", s(&scene)]));
+    let t = scene_toml(&scene);
+    let profiles = t["profile"].as_array().expect("profiles");
+    let wide = profiles
+        .iter()
+        .find(|p| p["name"].as_str() == Some("MH-100 (14-Channel)"))
+        .expect("the 14-channel mode");
+    assert_eq!(wide["pan_range"].as_float(), Some(630.0));
+    assert_eq!(wide["tilt_range"].as_float(), Some(220.0));
+    let par = profiles
+        .iter()
+        .find(|p| p["name"].as_str() == Some(PROFILE))
+        .expect("the PAR");
+    assert!(par.get("pan_range").is_none(), "a PAR has no travel");
+    let config = ready_for_check(&dir, &scene);
+    stdout(&run(&["check", "--config", s(&config)]));
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 /// Python's zipfile and xml.etree, not our code, read every fixture of the published
 /// Capture show (`FixtureID`, the break-0 `Address` as universe and address) and every
 /// mode of the published iSpiiderX GDTF (footprint = its highest `Offset`; the emitters'
