@@ -684,6 +684,26 @@ fn the_demo_scene_is_imported_from_its_mvr() {
         .map(|l| l.channel)
         .collect();
     assert_eq!(movers, [45, 46, 47, 48, 49, 50]);
+    // The movers' type as the MVR's visobjd@mover.gdtf has it: Dimmer at offset 1, Pan at
+    // "2,3" from -270 to 270, Tilt at "4,5" from -125 to 125, ColorAdd_R, _G, _B, _W.
+    let mover = got
+        .profile
+        .iter()
+        .find(|p| p.name == "visobjd mover (Default)")
+        .expect("the movers' profile");
+    assert_eq!(
+        mover.channels,
+        [
+            "intensity",
+            "pan16",
+            "tilt16",
+            "red",
+            "green",
+            "blue",
+            "white"
+        ]
+    );
+    assert_eq!((mover.pan_range, mover.tilt_range), (None, Some(250.0)));
     for l in want.light.iter_mut().filter(|l| !l.positions.is_empty()) {
         assert_eq!(l.positions.len(), 5, "light {}", l.channel);
         assert_eq!(l.basis, None, "light {}", l.channel);
