@@ -3,10 +3,11 @@
 //! `DMXChannels` > `DMXChannel` (`DMXBreak`, `Offset` = the channel's addresses from most
 //! to least significant, empty or `None` for a virtual channel) > `LogicalChannel`
 //! (`Attribute`) > `ChannelFunction` (`Attribute`, `Default`, `DMXFrom`, `Emitter`,
-//! `PhysicalFrom`/`PhysicalTo` for `Pan` and `Tilt`, `ChannelSet`s), and `PhysicalDescriptions` > `Emitters` > `Emitter` (`Color` = CIE
-//! xyY). The tables are in mvrdevelopment/spec `gdtf-spec.md` (Tables 16, 58, 59, 60 and
-//! the DMXValue type: `v/n` is `v` in `n` bytes, mirrored to the channel's resolution;
-//! `v/ns` is shifted).
+//! `PhysicalFrom`/`PhysicalTo` for `Pan` and `Tilt`, `ChannelSet`s), and
+//! `PhysicalDescriptions` > `Emitters` > `Emitter` (`Color` = CIE xyY). The tables are in
+//! mvrdevelopment/spec `gdtf-spec.md` (Tables 16, 58, 59, 60 and the DMXValue type: `v/n`
+//! is `v` in `n` bytes, mirrored to the channel's resolution; `v/ns` is shifted; a
+//! `ChannelFunction`'s `PhysicalFrom` and `PhysicalTo` default to 0 and 1).
 
 use visobjd_scene::profile::{DEFAULT_EMITTERS, EmitterFile, Profile, ProfileFile};
 

@@ -44,7 +44,7 @@
 //! channel = 1                 # unique console channel
 //! name = "FOH L1"             # optional
 //! group = "front warm"        # optional
-//! profile = "dimmer"          # dimmer, dimmer16, rgb, irgb, rgbw, irgbw, rgba, or a [[profile]]
+//! profile = "dimmer"          # a built-in (dimmer, rgb, irgb, ...) or a [[profile]]
 //! universe = 1
 //! address = 1                 # the footprint must fit in 1..=512 and not overlap
 //! position = [-4.0, 7.0, -8.0]
