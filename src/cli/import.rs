@@ -476,11 +476,19 @@ fn import_types(file: &str, types: &[FixtureType], out: Option<&Path>) -> anyhow
     for t in types {
         match &t.profile {
             Ok(p) => println!(
-                "profile \"{}\": {} slot{}: {}",
+                "profile \"{}\": {} slot{}: {}{}",
                 t.name,
                 p.footprint(),
                 if p.footprint() == 1 { "" } else { "s" },
-                p.channel_names().join(", ")
+                p.channel_names().join(", "),
+                if p.is_moving() {
+                    format!(
+                        "; pan {} and tilt {} degrees of travel",
+                        p.pan_range, p.tilt_range
+                    )
+                } else {
+                    String::new()
+                }
             ),
             Err(why) => println!(
                 "needs a profile: {}{}: {why}",

@@ -118,8 +118,9 @@ pub fn main() -> std::process::ExitCode {
         Subcommand::Synth { rig, out } => visobjd_synth::synth(&rig, &out)
             .map(|r| {
                 println!(
-                    "synth: {} lights at {}x{} in {:.1} s -> {}",
+                    "synth: {} lights, {} images at {}x{} in {:.1} s -> {}",
                     r.lights,
+                    r.images,
                     r.width,
                     r.height,
                     r.seconds,

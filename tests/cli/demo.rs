@@ -36,7 +36,7 @@ fn check_reports_the_shipped_config_clean() {
         String::from_utf8_lossy(&out.stderr)
     );
     let text = String::from_utf8_lossy(&out.stdout);
-    assert!(text.contains("44 in "), "{text}");
+    assert!(text.contains("50 in "), "{text}");
     assert!(
         text.contains("universe 1:") && text.contains("universe 2:"),
         "{text}"

@@ -531,6 +531,47 @@ fn a_fixture_type_lists_its_modes_and_adds_them_to_a_scene() {
     );
 }
 
+/// A published moving head (the Stairville MH-100 from the Open Fixture Library) is listed
+/// with its pan and tilt slots and travel, and its profiles go into scene.toml with the
+/// travel as `pan_range` and `tilt_range` (its `angleEnd`s, 630 and 220 degrees).
+#[test]
+fn a_moving_head_type_keeps_its_pan_and_tilt_travel() {
+    let dir = temp_dir("import-mover");
+    let mvr = dir.join("plot.mvr");
+    write_mvr(&mvr, &plot());
+    let scene = dir.join("scene");
+    stdout(&run(&["import", s(&mvr), "--out", s(&scene)]));
+    let mover = fixtures().join("stairville-mh-100.json");
+    let out = stdout(&run(&["import", s(&mover)]));
+    assert!(
+        out.contains("profile \"MH-100 (9-Channel)\": 9 slots: pan, tilt, fixed:0, intensity, red, green, blue, white, fixed:0; pan 630 and tilt 220 degrees of travel"),
+        "{out}"
+    );
+    assert!(
+        out.contains(
+            "profile \"MH-100 (14-Channel)\": 14 slots: pan16, tilt16, fixed:0, intensity,"
+        ),
+        "{out}"
+    );
+    stdout(&run(&["import", s(&mover), "--out", s(&scene)]));
+    let t = scene_toml(&scene);
+    let profiles = t["profile"].as_array().expect("profiles");
+    let wide = profiles
+        .iter()
+        .find(|p| p["name"].as_str() == Some("MH-100 (14-Channel)"))
+        .expect("the 14-channel mode");
+    assert_eq!(wide["pan_range"].as_float(), Some(630.0));
+    assert_eq!(wide["tilt_range"].as_float(), Some(220.0));
+    let par = profiles
+        .iter()
+        .find(|p| p["name"].as_str() == Some(PROFILE))
+        .expect("the PAR");
+    assert!(par.get("pan_range").is_none(), "a PAR has no travel");
+    let config = ready_for_check(&dir, &scene);
+    stdout(&run(&["check", "--config", s(&config)]));
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 /// Python's zipfile and xml.etree, not our code, read every fixture of the published
 /// Capture show (`FixtureID`, the break-0 `Address` as universe and address) and every
 /// mode of the published iSpiiderX GDTF (footprint = its highest `Offset`; the emitters'
@@ -605,7 +646,10 @@ else:
 /// The demo's `scene.toml` is generated from its MVR (`scenes/demo/demo.mvr`, with a GDTF
 /// type per fixture) by `visobjd import`: importing the shipped MVR into a copy of the
 /// shipped scene gives the same bytes (so the two cannot drift), and into an empty folder
-/// the same scene but for its name (so it is the MVR, not the kept scene, that decides).
+/// the same scene but for its name and the movers' positions (so it is the MVR, not the
+/// kept scene, that decides everything else). The positions come from `visobjd synth`,
+/// not the MVR: a fresh import gives each of the six movers a `basis/NNN.exr` instead of
+/// its five `[[light.position]]` tables, and nothing else differs.
 #[test]
 fn the_demo_scene_is_imported_from_its_mvr() {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
@@ -618,7 +662,7 @@ fn the_demo_scene_is_imported_from_its_mvr() {
     let mvr = demo.join("demo.mvr");
     let out = stdout(&run(&["import", s(&mvr), "--out", s(&again)]));
     assert!(
-        out.contains("import: 44 lights") && out.contains("(0 new)"),
+        out.contains("import: 50 lights") && out.contains("(0 new)"),
         "{out}"
     );
     let got = std::fs::read_to_string(again.join("scene.toml")).expect("imported");
@@ -629,20 +673,53 @@ fn the_demo_scene_is_imported_from_its_mvr() {
     let fresh = dir.join("fresh");
     stdout(&run(&["import", s(&mvr), "--out", s(&fresh)]));
     let got = std::fs::read_to_string(fresh.join("scene.toml")).expect("imported");
-    let body = |t: &str| {
-        t.lines()
-            .skip_while(|l| l.starts_with("name = "))
-            .collect::<Vec<_>>()
-            .join("\n")
+    let parse = |name: &str, text: &str| {
+        visobjd_scene::SceneFile::parse(Path::new(name), text).expect("scene.toml parses")
     };
-    assert_eq!(body(&got), body(&shipped));
+    let (mut want, got) = (parse("shipped", &shipped), parse("fresh", &got));
+    let movers: Vec<u32> = want
+        .light
+        .iter()
+        .filter(|l| !l.positions.is_empty())
+        .map(|l| l.channel)
+        .collect();
+    assert_eq!(movers, [45, 46, 47, 48, 49, 50]);
+    // The movers' type as the MVR's visobjd@mover.gdtf has it: Dimmer at offset 1, Pan at
+    // "2,3" from -270 to 270, Tilt at "4,5" from -125 to 125, ColorAdd_R, _G, _B, _W.
+    let mover = got
+        .profile
+        .iter()
+        .find(|p| p.name == "visobjd mover (Default)")
+        .expect("the movers' profile");
+    assert_eq!(
+        mover.channels,
+        [
+            "intensity",
+            "pan16",
+            "tilt16",
+            "red",
+            "green",
+            "blue",
+            "white"
+        ]
+    );
+    assert_eq!((mover.pan_range, mover.tilt_range), (None, Some(250.0)));
+    for l in want.light.iter_mut().filter(|l| !l.positions.is_empty()) {
+        assert_eq!(l.positions.len(), 5, "light {}", l.channel);
+        assert_eq!(l.basis, None, "light {}", l.channel);
+        l.positions.clear();
+        l.basis = Some(format!("basis/{:03}.exr", l.channel));
+    }
+    want.name = got.name.clone();
+    assert_eq!(got.to_toml(), want.to_toml());
     std::fs::remove_dir_all(&dir).ok();
 }
 
 /// The demo's patch exported as an MVR by the independent exporter
 /// `tests/peers/export_mvr.py` imports back as the same patch: every light's channel,
-/// name, group, universe, address and profile slots and emitters, and the same DMX bytes
-/// for the same looks.
+/// name, group, universe, address and profile slots, emitters and pan and tilt travel
+/// (the movers' GDTF `PhysicalFrom`/`PhysicalTo`), and the same DMX bytes for the same
+/// looks.
 #[test]
 fn the_demo_rig_round_trips_through_mvr() {
     use visobjd_scene::Scene;
@@ -672,7 +749,7 @@ fn the_demo_rig_round_trips_through_mvr() {
 
     let scene_dir = dir.join("scene");
     let out = stdout(&run(&["import", s(&exported), "--out", s(&scene_dir)]));
-    assert!(out.contains("import: 44 lights"), "{out}");
+    assert!(out.contains("import: 50 lights"), "{out}");
     let original = Scene::load(&demo).expect("demo scene");
     let imported = Scene::load(&scene_dir).expect("imported scene");
     assert_eq!(original.lights.len(), imported.lights.len());
@@ -684,8 +761,8 @@ fn the_demo_rig_round_trips_through_mvr() {
         assert_eq!(original.groups[a.group].name, imported.groups[b.group].name);
         let (pa, pb) = (original.profile(i), imported.profile(i));
         assert_eq!(
-            (&pa.slots, &pa.emitters),
-            (&pb.slots, &pb.emitters),
+            (&pa.slots, &pa.emitters, pa.pan_range, pa.tilt_range),
+            (&pb.slots, &pb.emitters, pb.pan_range, pb.tilt_range),
             "light {}",
             a.channel
         );

@@ -1,5 +1,5 @@
-//! Export to Eos for the 44-light demo stage: the exact command lines of a preset (how
-//! they reach a console and are confirmed: daemon_eos.rs).
+//! Export to Eos for the demo stage (44 fixed lights and 6 movers): the exact command
+//! lines of a preset (how they reach a console and are confirmed: daemon_eos.rs).
 
 use std::path::Path;
 
@@ -14,11 +14,13 @@ fn a_44_light_look_arrives_as_exact_command_lines() {
         "/scenes/demo"
     )))
     .unwrap();
-    assert_eq!(scene.lights.len(), 44);
-    let mut look = Look::off(44);
+    let n = scene.lights.len();
+    assert_eq!(n, 50);
+    let mut look = Look::off(n);
     for (i, lv) in look.levels.iter_mut().enumerate() {
         *lv = Level {
-            intensity: i as f32 / 43.0,
+            // The 44 fixed lights from 0 to full, the movers (45-50) at full.
+            intensity: (i as f32 / 43.0).min(1.0),
             color: if scene.profile(i).has_colour() {
                 [1.0, 0.5, 0.0]
             } else {
@@ -28,8 +30,9 @@ fn a_44_light_look_arrives_as_exact_command_lines() {
         };
     }
     let lines = preset_commands(&scene, &look, 7, &Default::default());
-    let colour = (0..44).filter(|&i| scene.profile(i).has_colour()).count();
-    assert_eq!(lines.len(), 44 + colour + 1);
+    let colour = (0..n).filter(|&i| scene.profile(i).has_colour()).count();
+    let movers = scene.lights.iter().filter(|l| l.is_moving()).count();
+    assert_eq!(lines.len(), n + colour + movers + 1);
     assert_eq!(lines[0], "Chan 1 At 0 Enter");
     // Levels are the wire's: 8-bit bytes as percent with one decimal.
     let has = |l: &str| assert!(lines.contains(&l.to_string()), "{l}: {lines:?}");
@@ -41,7 +44,7 @@ fn a_44_light_look_arrives_as_exact_command_lines() {
     // The demo's profiles come from its MVR's GDTF types: found by the built-in's slots.
     let first = |p: &str| {
         let slots = visobjd_scene::profile::Profile::built_in(p).unwrap().slots;
-        let i = (0..44).find(|&i| scene.profile(i).slots == slots).unwrap();
+        let i = (0..n).find(|&i| scene.profile(i).slots == slots).unwrap();
         (scene.lights[i].channel, i)
     };
     let (ch, i) = first("irgb");
@@ -61,6 +64,6 @@ fn a_44_light_look_arrives_as_exact_command_lines() {
     );
     assert_eq!(
         lines.last().unwrap(),
-        "Chan 1 Thru 44 Record Preset 7 Enter"
+        "Chan 1 Thru 50 Record Preset 7 Enter"
     );
 }

@@ -8,7 +8,11 @@ address (universe - 1) * 512 + address in <Address break="0">), inside a <GroupO
 named after its group; every profile becomes `visobjd@NAME.gdtf` with one DMX mode,
 "Default", whose channels carry the GDTF attributes of the profile's slots. No emitters
 are described, so the importer gives them visobjd's default colours, as the built-in
-profiles have. The zip entries carry a fixed date so the same scene gives the same bytes.
+profiles have. A moving light's `pan`/`pan16` and `tilt`/`tilt16` slots become `Pan` and
+`Tilt` channels (16-bit: two offsets, coarse then fine) whose channel function runs from
+PhysicalFrom = -range/2 to PhysicalTo = +range/2 degrees (the profile's `pan_range` and
+`tilt_range`, default 540 and 270), with the DMX centre as the default. The zip entries
+carry a fixed date so the same scene gives the same bytes.
 
 usage: export_mvr.py SCENE.toml OUT.mvr
 """
@@ -45,14 +49,22 @@ ATTRIBUTE = {
     "cyan": "ColorSub_C",
     "magenta": "ColorSub_M",
     "yellow": "ColorSub_Y",
+    "pan": "Pan",
+    "pan16": "Pan",
+    "tilt": "Tilt",
+    "tilt16": "Tilt",
 }
+
+# docs/scene.md: a profile's full travel in degrees when it does not say.
+DEFAULT_RANGE = {"Pan": 540.0, "Tilt": 270.0}
 
 DATE = (2026, 1, 1, 0, 0, 0)
 NS = uuid.UUID("6f1c0e7a-3d0b-4a57-9a4e-7a1c5c0de000")
 
 
-def gdtf(name, slots):
-    """description.xml of a one-mode fixture type with `slots`."""
+def gdtf(name, profile):
+    """description.xml of a one-mode fixture type: `profile` as a [[profile]] table."""
+    slots = profile["channels"]
     root = ET.Element("GDTF", DataVersion="1.2")
     ft = ET.SubElement(root, "FixtureType", Name=name, ShortName=name, LongName=name,
                        Manufacturer="visobjd", Description="exported by tests/peers/export_mvr.py",
@@ -71,7 +83,7 @@ def gdtf(name, slots):
             attribute, width, default = "NoFeature", 1, f"{int(slot[6:])}/1"
         elif slot in ATTRIBUTE:
             attribute = ATTRIBUTE[slot]
-            width = 2 if slot == "intensity16" else 1
+            width = 2 if slot.endswith("16") else 1
             default = "0/1"
         else:
             sys.exit(f"export_mvr: slot {slot} of profile {name} has no GDTF attribute here")
@@ -81,9 +93,15 @@ def gdtf(name, slots):
                                 InitialFunction=function, Highlight="None", Geometry="Body")
         logical = ET.SubElement(channel, "LogicalChannel", Attribute=attribute, Snap="No",
                                 Master="None", MibFade="0", DMXChangeTimeLimit="0")
+        physical = ("0", "1")
+        if attribute in DEFAULT_RANGE:
+            half = profile.get(attribute.lower() + "_range", DEFAULT_RANGE[attribute]) / 2
+            physical = (f"{-half:g}", f"{half:g}")
+            default = f"{1 << (8 * width - 1)}/{width}"
         ET.SubElement(logical, "ChannelFunction", Name=f"{attribute} 1", Attribute=attribute,
                       OriginalAttribute="", DMXFrom="0/1", Default=default,
-                      PhysicalFrom="0", PhysicalTo="1", RealFade="0", RealAcceleration="0")
+                      PhysicalFrom=physical[0], PhysicalTo=physical[1], RealFade="0",
+                      RealAcceleration="0")
         offset += width
     ET.SubElement(mode, "Relations")
     ET.SubElement(mode, "FTMacros")
@@ -94,9 +112,9 @@ def main():
     scene_path, out = sys.argv[1], sys.argv[2]
     with open(scene_path, "rb") as f:
         scene = tomllib.load(f)
-    profiles = dict(BUILT_IN)
+    profiles = {name: {"channels": slots} for name, slots in BUILT_IN.items()}
     for p in scene.get("profile", []):
-        profiles[p["name"]] = p["channels"]
+        profiles[p["name"]] = p
     used = sorted({l["profile"] for l in scene["light"]})
 
     root = ET.Element("GeneralSceneDescription", verMajor="1", verMinor="6")

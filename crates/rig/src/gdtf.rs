@@ -3,10 +3,11 @@
 //! `DMXChannels` > `DMXChannel` (`DMXBreak`, `Offset` = the channel's addresses from most
 //! to least significant, empty or `None` for a virtual channel) > `LogicalChannel`
 //! (`Attribute`) > `ChannelFunction` (`Attribute`, `Default`, `DMXFrom`, `Emitter`,
-//! `ChannelSet`s), and `PhysicalDescriptions` > `Emitters` > `Emitter` (`Color` = CIE
-//! xyY). The tables are in mvrdevelopment/spec `gdtf-spec.md` (Tables 16, 58, 59, 60 and
-//! the DMXValue type: `v/n` is `v` in `n` bytes, mirrored to the channel's resolution;
-//! `v/ns` is shifted).
+//! `PhysicalFrom`/`PhysicalTo` for `Pan` and `Tilt`, `ChannelSet`s), and
+//! `PhysicalDescriptions` > `Emitters` > `Emitter` (`Color` = CIE xyY). The tables are in
+//! mvrdevelopment/spec `gdtf-spec.md` (Tables 16, 58, 59, 60 and the DMXValue type: `v/n`
+//! is `v` in `n` bytes, mirrored to the channel's resolution; `v/ns` is shifted; a
+//! `ChannelFunction`'s `PhysicalFrom` and `PhysicalTo` default to 0 and 1).
 
 use visobjd_scene::profile::{DEFAULT_EMITTERS, EmitterFile, Profile, ProfileFile};
 
@@ -36,6 +37,10 @@ pub struct Channel {
     pub open: Option<u64>,
     /// The emitter a channel function links to (`Emitter=`).
     pub emitter: Option<String>,
+    /// For `Pan` and `Tilt`: `PhysicalFrom` and `PhysicalTo` (degrees) of the channel's
+    /// first function of that attribute, where the file gives either (the spec's defaults,
+    /// 0 and 1, fill the other); `None` leaves the profile's default travel.
+    pub physical: Option<(f64, f64)>,
 }
 
 /// One `DMXMode`.
@@ -172,6 +177,17 @@ impl GdtfType {
                     .and_then(|f| f.attribute("Emitter"))
                     .or_else(|| functions.iter().find_map(|f| f.attribute("Emitter")))
                     .map(str::to_string);
+                let physical = if matches!(attribute.as_str(), "Pan" | "Tilt") {
+                    functions
+                        .iter()
+                        .find(|f| f.attribute("Attribute") == Some(attribute.as_str()))
+                        .map(|f| physical_range(*f))
+                        .transpose()
+                        .map_err(|e| bad(format!("channel `{attribute}`: {e}")))?
+                        .flatten()
+                } else {
+                    None
+                };
                 channels.push(Channel {
                     dmx_break,
                     offsets,
@@ -179,6 +195,7 @@ impl GdtfType {
                     default,
                     open,
                     emitter,
+                    physical,
                 });
             }
             modes.push(Mode { name, channels });
@@ -261,13 +278,16 @@ impl GdtfType {
         let mut slots: Vec<Option<String>> = vec![None; footprint];
         let mut emitters: Vec<EmitterFile> = Vec::new();
         let mut additive: Vec<&str> = Vec::new();
+        let (mut pan_range, mut tilt_range) = (None, None);
         for c in &mode.channels {
-            let mut names: Vec<String> = match colour_slot(&c.attribute) {
-                Some("intensity") if c.offsets.len() >= 2 && c.offsets[1] == c.offsets[0] + 1 => {
-                    vec!["intensity16".into(), String::new()]
-                }
-                Some(slot) => vec![slot.to_string()],
-                None => {
+            let slot = attribute_slot(&c.attribute);
+            let wide = slot
+                .and_then(crate::wide_slot)
+                .filter(|_| c.offsets.len() >= 2 && c.offsets[1] == c.offsets[0] + 1);
+            let mut names: Vec<String> = match (slot, wide) {
+                (_, Some(wide)) => vec![wide.into(), String::new()],
+                (Some(slot), None) => vec![slot.to_string()],
+                (None, None) => {
                     let value = c.open.unwrap_or(c.default);
                     let n = c.offsets.len();
                     (0..n)
@@ -276,7 +296,7 @@ impl GdtfType {
                 }
             };
             // The fine bytes of a 16-bit colour channel stay 0: its coarse byte carries
-            // the level at 8 bits.
+            // the level at 8 bits (so do a pan's or tilt's whose fine byte is not next).
             names.resize(c.offsets.len(), "fixed:0".into());
             for (&o, n) in c.offsets.iter().zip(names) {
                 if slots[o - 1].is_some() {
@@ -284,7 +304,19 @@ impl GdtfType {
                 }
                 slots[o - 1] = Some(n);
             }
-            if let Some(slot) = colour_slot(&c.attribute).filter(|s| is_emitter(s)) {
+            if let Some((from, to)) = c.physical {
+                let travel = crate::travel(from, to).map_err(|e| {
+                    format!(
+                        "channel `{}`: PhysicalFrom {from} to PhysicalTo {to}: {e}",
+                        c.attribute
+                    )
+                })?;
+                match c.attribute.as_str() {
+                    "Pan" => pan_range = Some(travel),
+                    _ => tilt_range = Some(travel),
+                }
+            }
+            if let Some(slot) = slot.filter(|s| is_emitter(s)) {
                 additive.push(slot.trim_start_matches("emitter:"));
                 let gdtf = c
                     .emitter
@@ -316,8 +348,8 @@ impl GdtfType {
             name: name.to_string(),
             channels,
             emitters,
-            pan_range: None,
-            tilt_range: None,
+            pan_range,
+            tilt_range,
         })
         .map_err(|e| e.replace(&format!("profile `{name}`: "), ""))?;
         if !profile.has_intensity() && !profile.has_colour() {
@@ -330,11 +362,14 @@ impl GdtfType {
 }
 
 /// The slot an attribute maps to, for the attributes visobjd drives (GDTF Annex A):
-/// `Dimmer`, the additive emitters `ColorAdd_*`, calibrated RGB `ColorRGB_*`, and the
-/// subtractive flags `ColorSub_*`. Anything else is held at a fixed value.
-fn colour_slot(attribute: &str) -> Option<&'static str> {
+/// `Dimmer`, `Pan` and `Tilt`, the additive emitters `ColorAdd_*`, calibrated RGB
+/// `ColorRGB_*`, and the subtractive flags `ColorSub_*`. Anything else is held at a fixed
+/// value.
+fn attribute_slot(attribute: &str) -> Option<&'static str> {
     Some(match attribute {
         "Dimmer" => "intensity",
+        "Pan" => "pan",
+        "Tilt" => "tilt",
         "ColorAdd_R" | "ColorRGB_Red" => "red",
         "ColorAdd_G" | "ColorRGB_Green" => "green",
         "ColorAdd_B" | "ColorRGB_Blue" => "blue",
@@ -356,6 +391,27 @@ fn colour_slot(attribute: &str) -> Option<&'static str> {
         "ColorSub_Y" => "yellow",
         _ => return None,
     })
+}
+
+/// A `Pan` or `Tilt` function's `PhysicalFrom` and `PhysicalTo` in degrees, `None` when
+/// it gives neither (then the spec's 0 to 1 would be a travel of one degree, so the
+/// profile keeps visobjd's default); an error names a value that is not a number.
+fn physical_range(function: roxmltree::Node) -> Result<Option<(f64, f64)>, String> {
+    let value = |key: &str, default: f64| match function.attribute(key).map(str::trim) {
+        None => Ok(default),
+        Some(v) => v
+            .parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite())
+            .ok_or_else(|| format!("{key} `{v}` is not a number of degrees")),
+    };
+    if function.attribute("PhysicalFrom").is_none() && function.attribute("PhysicalTo").is_none() {
+        return Ok(None);
+    }
+    Ok(Some((
+        value("PhysicalFrom", 0.0)?,
+        value("PhysicalTo", 1.0)?,
+    )))
 }
 
 /// Puts the default emitters of a mode on the scale of the GDTF's Y values where the
@@ -492,6 +548,96 @@ mod tests {
         let mut none = Vec::new();
         scale_defaults(&["red"], &mut none);
         assert!(none.is_empty());
+    }
+
+    /// A GDTF description of one mode with these `DMXChannel`s.
+    fn mover(channels: &str) -> String {
+        format!(
+            r#"<GDTF DataVersion="1.2"><FixtureType Manufacturer="Test" Name="Mover">
+            <DMXModes><DMXMode Name="Std"><DMXChannels>{channels}</DMXChannels></DMXMode>
+            </DMXModes></FixtureType></GDTF>"#
+        )
+    }
+
+    fn channel(offset: &str, attribute: &str, physical: &str) -> String {
+        format!(
+            r#"<DMXChannel Offset="{offset}"><LogicalChannel Attribute="{attribute}">
+            <ChannelFunction Attribute="{attribute}" Default="0/1" {physical}/>
+            </LogicalChannel></DMXChannel>"#
+        )
+    }
+
+    fn profile(xml: &str) -> Result<Profile, String> {
+        let ty = GdtfType::parse_description("m.gdtf", xml.as_bytes()).expect("parses");
+        ty.fixture_type("Std").expect("mode").profile
+    }
+
+    #[test]
+    fn pan_and_tilt_become_position_slots_with_their_travel() {
+        let xml = mover(
+            &[
+                channel("1,2", "Pan", r#"PhysicalFrom="-270" PhysicalTo="270""#),
+                channel("3", "Tilt", r#"PhysicalFrom="110" PhysicalTo="-110""#),
+                channel("4", "Dimmer", ""),
+            ]
+            .concat(),
+        );
+        let p = profile(&xml).expect("a profile");
+        assert_eq!(p.channel_names(), ["pan16", "tilt", "intensity"]);
+        assert!(p.is_moving());
+        assert_eq!((p.pan_range, p.tilt_range), (540.0, 220.0));
+        // No PhysicalFrom/To: the default travel, not the spec's 0 to 1 (one degree). A
+        // fine byte that is not next to its coarse one is held at 0, as for a dimmer.
+        let xml = mover(
+            &[
+                channel("1,3", "Pan", ""),
+                channel("2", "Tilt", ""),
+                channel("4", "Dimmer", ""),
+            ]
+            .concat(),
+        );
+        let p = profile(&xml).expect("a profile");
+        assert_eq!(p.channel_names(), ["pan", "tilt", "fixed:0", "intensity"]);
+        assert_eq!(
+            (p.pan_range, p.tilt_range),
+            (
+                visobjd_scene::profile::DEFAULT_PAN_RANGE,
+                visobjd_scene::profile::DEFAULT_TILT_RANGE
+            )
+        );
+    }
+
+    #[test]
+    fn a_bad_physical_range_is_named_not_guessed() {
+        let xml = mover(
+            &[
+                channel("1", "Pan", r#"PhysicalFrom="90" PhysicalTo="90""#),
+                channel("2", "Dimmer", ""),
+            ]
+            .concat(),
+        );
+        assert_eq!(
+            profile(&xml).expect_err("no travel"),
+            "channel `Pan`: PhysicalFrom 90 to PhysicalTo 90: a travel of 0 degrees, not above 0 and at most 3600"
+        );
+        let xml = mover(&channel(
+            "1",
+            "Tilt",
+            r#"PhysicalFrom="-1e9" PhysicalTo="0""#,
+        ));
+        assert!(
+            profile(&xml)
+                .expect_err("too far")
+                .contains("travel of 1000000000 degrees")
+        );
+        let xml = mover(&channel("1", "Tilt", r#"PhysicalFrom="up""#));
+        let e = GdtfType::parse_description("m.gdtf", xml.as_bytes())
+            .expect_err("not a number")
+            .to_string();
+        assert_eq!(
+            e,
+            "m.gdtf: mode `Std`: channel `Tilt`: PhysicalFrom `up` is not a number of degrees"
+        );
     }
 
     #[test]

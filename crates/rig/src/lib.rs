@@ -351,6 +351,32 @@ impl Library {
     }
 }
 
+/// The 16-bit (coarse, fine) slot of a slot that has one: what a GDTF channel with two
+/// adjacent offsets, or an OFL channel followed by its fine alias, becomes. Colours have
+/// none (their coarse byte carries them at 8 bits).
+fn wide_slot(slot: &str) -> Option<&'static str> {
+    Some(match slot {
+        "intensity" => "intensity16",
+        "pan" => "pan16",
+        "tilt" => "tilt16",
+        _ => return None,
+    })
+}
+
+/// The full travel in degrees between a pan's or tilt's two end angles (either way
+/// round: the profile keeps the travel, DMX centre being 0), or why it is not one a
+/// profile takes (`pan_range` and `tilt_range` are above 0 and at most 3600).
+fn travel(from: f64, to: f64) -> Result<f64, String> {
+    let travel = (to - from).abs();
+    if travel.is_finite() && travel > 0.0 && travel <= 3600.0 {
+        Ok(travel)
+    } else {
+        Err(format!(
+            "a travel of {travel} degrees, not above 0 and at most 3600"
+        ))
+    }
+}
+
 /// What a source file is, told by its content.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Kind {

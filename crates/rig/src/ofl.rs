@@ -6,8 +6,12 @@
 //! object is a pixel-matrix insert, not modelled). A channel whose only capability is
 //! `Intensity` is the dimmer (16-bit when its fine alias follows it); `ColorIntensity`
 //! with a `color` is an emitter; a `ShutterStrobe` capability with `shutterEffect: Open`
-//! gives the value a shutter is held at; anything else is held at its `defaultValue`.
-//! OFL gives no chromaticities: emitters take visobjd's defaults.
+//! gives the value a shutter is held at; a channel whose only capability is `Pan` or
+//! `Tilt` aims the light (16-bit when its fine alias follows it), its travel
+//! `angleEnd - angleStart` in degrees (`capability.json`: a `rotationAngle`, `"540deg"`;
+//! a percentage says no angle, so the profile keeps visobjd's default); anything else is
+//! held at its `defaultValue`. OFL gives no chromaticities: emitters take visobjd's
+//! defaults.
 
 use visobjd_scene::profile::{Profile, ProfileFile};
 
@@ -147,6 +151,7 @@ impl OflType {
         let mut channels: Vec<String> = Vec::with_capacity(mode.channels.len());
         let mut dimmers = 0;
         let mut skip_next = false;
+        let (mut pan_range, mut tilt_range) = (None, None);
         for (i, key) in mode.channels.iter().enumerate() {
             if std::mem::take(&mut skip_next) {
                 continue;
@@ -160,20 +165,31 @@ impl OflType {
             }
             if let Some(def) = self.channels.get(key) {
                 let slot = slot(def);
-                if slot.as_deref() == Some("intensity") {
-                    dimmers += 1;
+                match slot {
+                    Some("intensity") => dimmers += 1,
+                    Some("pan") => {
+                        pan_range = travel(def).map_err(|e| format!("channel `{key}`: {e}"))?
+                    }
+                    Some("tilt") => {
+                        tilt_range = travel(def).map_err(|e| format!("channel `{key}`: {e}"))?
+                    }
+                    _ => {}
+                }
+                if let Some(wide) = slot.and_then(crate::wide_slot) {
                     let fine = def
                         .get("fineChannelAliases")
                         .and_then(|a| a.get(0))
                         .and_then(|a| a.as_str());
                     if fine.is_some() && mode.channels.get(i + 1).and_then(|c| c.as_deref()) == fine
                     {
-                        channels.push("intensity16".into());
+                        channels.push(wide.into());
                         skip_next = true;
                         continue;
                     }
                 }
-                channels.push(slot.unwrap_or_else(|| format!("fixed:{}", held_value(def))));
+                channels.push(
+                    slot.map_or_else(|| format!("fixed:{}", held_value(def)), str::to_string),
+                );
             } else if self.fine_of(key).is_some() {
                 // A fine byte whose coarse byte is 8-bit here (or is not a dimmer).
                 channels.push("fixed:0".into());
@@ -190,8 +206,8 @@ impl OflType {
             name: name.to_string(),
             channels,
             emitters: Vec::new(),
-            pan_range: None,
-            tilt_range: None,
+            pan_range,
+            tilt_range,
         })
         .map_err(|e| e.replace(&format!("profile `{name}`: "), ""))?;
         if !profile.has_intensity() && !profile.has_colour() {
@@ -204,31 +220,58 @@ impl OflType {
     }
 }
 
-/// The slot of a channel with a single `Intensity` or `ColorIntensity` capability.
-fn slot(def: &serde_json::Value) -> Option<String> {
+/// The slot of a channel with a single `Intensity`, `ColorIntensity`, `Pan` or `Tilt`
+/// capability.
+fn slot(def: &serde_json::Value) -> Option<&'static str> {
     let cap = def.get("capability")?;
     match cap.get("type")?.as_str()? {
-        "Intensity" => Some("intensity".into()),
-        "ColorIntensity" => Some(
-            match cap.get("color")?.as_str()? {
-                "Red" => "red",
-                "Green" => "green",
-                "Blue" => "blue",
-                "White" => "white",
-                "Amber" => "amber",
-                "Lime" => "lime",
-                "UV" => "uv",
-                "Cyan" => "emitter:cyan",
-                "Magenta" => "emitter:magenta",
-                "Yellow" => "emitter:yellow",
-                "Indigo" => "emitter:indigo",
-                "Warm White" => "emitter:warm-white",
-                "Cold White" => "emitter:cold-white",
-                _ => return None,
-            }
-            .into(),
-        ),
+        "Intensity" => Some("intensity"),
+        "Pan" => Some("pan"),
+        "Tilt" => Some("tilt"),
+        "ColorIntensity" => Some(match cap.get("color")?.as_str()? {
+            "Red" => "red",
+            "Green" => "green",
+            "Blue" => "blue",
+            "White" => "white",
+            "Amber" => "amber",
+            "Lime" => "lime",
+            "UV" => "uv",
+            "Cyan" => "emitter:cyan",
+            "Magenta" => "emitter:magenta",
+            "Yellow" => "emitter:yellow",
+            "Indigo" => "emitter:indigo",
+            "Warm White" => "emitter:warm-white",
+            "Cold White" => "emitter:cold-white",
+            _ => return None,
+        }),
         _ => None,
+    }
+}
+
+/// A `Pan` or `Tilt` channel's travel in degrees from its capability's `angleStart` and
+/// `angleEnd`; `None` (the profile's default) when they are percentages or absent, an
+/// error when they are degrees that are not a travel.
+fn travel(def: &serde_json::Value) -> Result<Option<f64>, String> {
+    let cap = def.get("capability");
+    let angle = |key: &str| -> Result<Option<f64>, String> {
+        let Some(v) = cap.and_then(|c| c.get(key)) else {
+            return Ok(None);
+        };
+        let text = v.as_str().unwrap_or("").trim();
+        if text.ends_with('%') {
+            return Ok(None);
+        }
+        text.strip_suffix("deg")
+            .and_then(|d| d.trim().parse::<f64>().ok())
+            .filter(|d| d.is_finite())
+            .map(Some)
+            .ok_or_else(|| format!("{key} {v} is not an angle like \"540deg\""))
+    };
+    match (angle("angleStart")?, angle("angleEnd")?) {
+        (Some(from), Some(to)) => crate::travel(from, to)
+            .map(Some)
+            .map_err(|e| format!("angleStart {from}deg to angleEnd {to}deg: {e}")),
+        _ => Ok(None),
     }
 }
 

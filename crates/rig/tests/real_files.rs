@@ -101,6 +101,31 @@ fn gdtf_robe_ispiiderx_reads_16_bit_channels_links_and_refuses_cells() {
         .find(|c| c.offsets == [8, 9])
         .expect("8,9");
     assert_eq!(red.emitter.as_deref(), Some("Red"));
+    // <DMXChannel ... Geometry="Yoke" ... Offset="1,2"> > <ChannelFunction Attribute="Pan"
+    // ... PhysicalFrom="-270.000000" PhysicalTo="270.000000">, and the Head's Tilt at
+    // Offset="3,4" with PhysicalFrom="110.000000" PhysicalTo="-110.000000" (reversed).
+    let pan = pattern
+        .channels
+        .iter()
+        .find(|c| c.offsets == [1, 2])
+        .expect("1,2");
+    assert_eq!(
+        (pan.attribute.as_str(), pan.physical),
+        ("Pan", Some((-270.0, 270.0)))
+    );
+    let tilt = pattern
+        .channels
+        .iter()
+        .find(|c| c.offsets == [3, 4])
+        .expect("3,4");
+    assert_eq!(
+        (tilt.attribute.as_str(), tilt.physical),
+        ("Tilt", Some((110.0, -110.0)))
+    );
+    assert_eq!(
+        dimmer.physical, None,
+        "only Pan and Tilt keep their physical range"
+    );
     // Three virtual Dimmer channels (Offset="") in Mode 10 are not slots.
     let mode10 = &ty.modes[0];
     assert_eq!(mode10.name, "Mode 10 - Pattern full RGBW");
@@ -347,4 +372,54 @@ fn a_library_finds_types_by_their_eos_names() {
         .expect("ofl");
     let e = find(&library, "Cameo", "ROOT_PAR_6_8-channel").expect_err("two files match");
     assert!(e.starts_with("several fixture types match it"), "{e}");
+}
+
+#[test]
+fn ofl_moving_head_pans_and_tilts_through_its_angles() {
+    let (name, bytes) = read("stairville-mh-100.json");
+    let ty = OflType::parse(&name, &bytes).expect("parses");
+    // "Pan": {"fineChannelAliases": ["Pan fine"], "capability": {"type": "Pan",
+    // "angleStart": "0deg", "angleEnd": "630deg"}}; "Tilt" likewise to "220deg".
+    // modes[1] "14-Channel": Pan, Pan fine, Tilt, Tilt fine, Pan/Tilt Speed, Dimmer, Red,
+    // Green, Blue, White, Color Temperature, Constant Color, Strobe, Special Functions
+    // (no defaultValue anywhere: held at 0).
+    let p = ty
+        .fixture_type("14-Channel")
+        .expect("mode")
+        .profile
+        .expect("a profile");
+    assert_eq!(p.footprint(), 14);
+    assert_eq!(
+        p.channel_names(),
+        [
+            "pan16",
+            "tilt16",
+            "fixed:0",
+            "intensity",
+            "red",
+            "green",
+            "blue",
+            "white",
+            "fixed:0",
+            "fixed:0",
+            "fixed:0",
+            "fixed:0"
+        ]
+    );
+    assert!(p.is_moving());
+    assert_eq!((p.pan_range, p.tilt_range), (630.0, 220.0));
+    // modes[0] "9-Channel" (shortName "9ch"): Pan, Tilt without their fine bytes.
+    let p = ty
+        .fixture_type("9ch")
+        .expect("mode")
+        .profile
+        .expect("a profile");
+    assert_eq!(&p.slots[..2], [Slot::Pan, Slot::Tilt]);
+    assert_eq!((p.pan_range, p.tilt_range), (630.0, 220.0));
+    // The travel goes into scene.toml's [[profile]] as pan_range and tilt_range.
+    let file = p.to_file();
+    assert_eq!(
+        (file.pan_range, file.tilt_range),
+        (Some(630.0), Some(220.0))
+    );
 }

@@ -44,7 +44,7 @@
 //! channel = 1                 # unique console channel
 //! name = "FOH L1"             # optional
 //! group = "front warm"        # optional
-//! profile = "dimmer"          # dimmer, dimmer16, rgb, irgb, rgbw, irgbw, rgba
+//! profile = "dimmer"          # a built-in (dimmer, rgb, irgb, ...) or a [[profile]]
 //! universe = 1
 //! address = 1                 # the footprint must fit in 1..=512 and not overlap
 //! position = [-4.0, 7.0, -8.0]
@@ -52,8 +52,33 @@
 //! beam = 19.0                 # full angle at full intensity, degrees
 //! field = 30.0                # full angle where it has faded to zero (>= beam)
 //! intensity = 40000.0         # on-axis candela
-//! gel = [1.0, 0.8, 0.6]       # optional, dimmer profiles only
+//! gel = [1.0, 0.8, 0.6]       # optional, profiles without colour only
+//!
+//! [[profile]]                 # as in scene.toml, copied to it
+//! name = "mover"
+//! channels = ["intensity", "pan16", "tilt16", "red", "green", "blue", "white"]
+//! pan_range = 540.0           # optional, degrees of full travel
+//! tilt_range = 270.0
+//!
+//! [[light]]                   # a moving light: a profile with pan and tilt, no `aim`
+//! channel = 45
+//! profile = "mover"
+//! universe = 3
+//! address = 1
+//! position = [-3.0, 7.5, 2.0] # hung pointing straight down
+//! beam = 14.0
+//! field = 22.0
+//! intensity = 60000.0
+//! [[light.focus]]             # one focus palette: one basis image, one [[light.position]]
+//! palette = 1                 # shared by the lights that have it, 1..=9999
+//! name = "DS left"            # optional, the same on every light
+//! aim = [3.0, 0.0, 1.5]       # the point the beam centre passes through
 //! ```
+//!
+//! A moving light hangs pointing straight down: tilt is the angle from straight down,
+//! pan the turn about the vertical, pan 0 tilting downstage (-z) and pan 90 towards +x
+//! ([`pan_tilt`]). Each focus's pan and tilt must be inside the profile's ranges (DMX
+//! centre = 0 degrees); its image is `basis/NNN-fpPP.exr` (light NNN, palette PP).
 //!
 //! # Light transport
 //!
@@ -69,17 +94,19 @@ mod trace;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use serde::Serialize;
-
 pub use rig::{
-    BoxProp, Cyc, CylinderProp, Legs, Room, SphereProp, Spotlight, Viewpoint, VirtualStage,
+    BoxProp, Cyc, CylinderProp, Focus, Legs, Room, SphereProp, Spotlight, Viewpoint, VirtualStage,
+    beam_direction, pan_tilt,
 };
+use visobjd_scene::{GroupFile, LightFile, PositionFile, SceneFile};
 
 /// What `synth` produced, for the command line to print.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SynthReport {
-    /// Number of basis images written.
+    /// Number of lights.
     pub lights: usize,
+    /// Number of basis images written (one per fixed light, one per focus of a mover).
+    pub images: usize,
     /// Image width in pixels.
     pub width: u32,
     /// Image height in pixels.
@@ -154,24 +181,56 @@ pub fn synth(rig: &Path, out: &Path) -> Result<SynthReport, SynthError> {
     })?;
     let renderer = render::Renderer::new(&parsed);
     let mut entries = Vec::with_capacity(parsed.lights.len());
+    let mut images = 0;
     for (i, light) in parsed.lights.iter().enumerate() {
-        let basis = basis_name(i);
-        let path = out.join(&basis);
-        write_exr(&path, parsed.width, parsed.height, &renderer.render(light))
+        let mut names = Vec::new();
+        for (k, direction) in light.directions().into_iter().enumerate() {
+            let basis = basis_name(i, light.focus.get(k).map(|f| f.palette));
+            let path = out.join(&basis);
+            write_exr(
+                &path,
+                parsed.width,
+                parsed.height,
+                &renderer.render(light, direction),
+            )
             .map_err(|source| SynthError::Exr { path, source })?;
-        entries.push(LightEntry {
+            names.push(basis);
+        }
+        images += names.len();
+        let positions: Vec<PositionFile> = light
+            .focus
+            .iter()
+            .zip(&names)
+            .map(|(f, basis)| {
+                let (pan, tilt) = pan_tilt(light.position, f.aim);
+                PositionFile {
+                    palette: f.palette,
+                    name: f.name.clone(),
+                    pan,
+                    tilt,
+                    basis: basis.clone(),
+                }
+            })
+            .collect();
+        entries.push(LightFile {
             channel: light.channel,
             name: light.name.clone(),
             group: light.group.clone(),
-            basis,
+            basis: positions.is_empty().then(|| names.remove(0)),
             profile: light.profile.clone(),
-            universe: light.universe,
-            address: light.address,
+            // Checked: universe 1..=63999, address 1..=512.
+            universe: light.universe as u16,
+            address: light.address as u16,
+            emitter_basis: Default::default(),
+            emitter_measured: Default::default(),
+            ma3_id: None,
+            positions,
         });
     }
     write_scene(out, &parsed, entries)?;
     Ok(SynthReport {
         lights: parsed.lights.len(),
+        images,
         width: parsed.width,
         height: parsed.height,
         seconds: start.elapsed().as_secs_f64(),
@@ -179,18 +238,33 @@ pub fn synth(rig: &Path, out: &Path) -> Result<SynthReport, SynthError> {
 }
 
 /// Renders one light (index into `rig.lights`) alone at full: linear RGB, row-major,
-/// `width * height` pixels, exactly what `synth` writes for it before half-float rounding.
+/// `width * height` pixels, exactly what `synth` writes for it before half-float rounding
+/// (a moving light in its first focus palette: see [`render_focus`]).
 ///
 /// # Panics
 /// If `light` is out of range.
 pub fn render_light(rig: &VirtualStage, light: usize) -> Vec<[f32; 3]> {
-    render::Renderer::new(rig).render(&rig.lights[light])
+    render_focus(rig, light, 0)
 }
 
-/// `basis/001.exr` for the first light: numbered by position in the rig, so names stay short
-/// and sorted whatever the channel numbers are.
-fn basis_name(index: usize) -> String {
-    format!("basis/{:03}.exr", index + 1)
+/// Renders light `light` alone at full in its `k`-th direction ([`Spotlight::directions`]:
+/// a moving light's `k`-th `[[light.focus]]`; 0 for a fixed light).
+///
+/// # Panics
+/// If `light` or `k` is out of range.
+pub fn render_focus(rig: &VirtualStage, light: usize, k: usize) -> Vec<[f32; 3]> {
+    let l = &rig.lights[light];
+    render::Renderer::new(rig).render(l, l.directions()[k])
+}
+
+/// `basis/001.exr` for the first light, `basis/045-fp03.exr` for the 45th in focus
+/// palette 3: numbered by position in the rig, so names stay short and sorted whatever the
+/// channel numbers are.
+fn basis_name(index: usize, palette: Option<u32>) -> String {
+    match palette {
+        None => format!("basis/{:03}.exr", index + 1),
+        Some(p) => format!("basis/{:03}-fp{p:02}.exr", index + 1),
+    }
 }
 
 /// Half-float RGB, ZIP-compressed: half the size of float and far more precision than a
@@ -220,47 +294,24 @@ fn write_exr(path: &Path, width: u32, height: u32, px: &[[f32; 3]]) -> exr::erro
     Image::from_layer(layer).write().to_file(path)
 }
 
-#[derive(Serialize)]
-struct SceneFile<'a> {
-    name: &'a str,
-    #[serde(skip_serializing_if = "Vec::is_empty")]
-    group: Vec<GroupEntry>,
-    light: Vec<LightEntry>,
-}
-
-#[derive(Serialize)]
-struct GroupEntry {
-    name: String,
-}
-
-#[derive(Serialize)]
-struct LightEntry {
-    channel: u32,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    name: Option<String>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    group: Option<String>,
-    basis: String,
-    profile: String,
-    universe: u32,
-    address: u32,
-}
-
-/// Writes `scene.toml` with the groups in order of first use.
-fn write_scene(out: &Path, rig: &VirtualStage, light: Vec<LightEntry>) -> Result<(), SynthError> {
-    let mut group: Vec<GroupEntry> = Vec::new();
+/// Writes `scene.toml` with the groups in order of first use and the rig's profiles.
+fn write_scene(out: &Path, rig: &VirtualStage, light: Vec<LightFile>) -> Result<(), SynthError> {
+    let mut group: Vec<GroupFile> = Vec::new();
     for g in rig.lights.iter().filter_map(|l| l.group.as_ref()) {
         if !group.iter().any(|e| &e.name == g) {
-            group.push(GroupEntry { name: g.clone() });
+            group.push(GroupFile { name: g.clone() });
         }
     }
     let scene = SceneFile {
-        name: &rig.name,
+        name: Some(rig.name.clone()),
+        exposure: 0.0,
         group,
         light,
+        profile: rig.profiles.clone(),
     };
     let path = out.join("scene.toml");
-    let text =
-        toml::to_string(&scene).map_err(|e| SynthError::Invalid(format!("scene.toml: {e}")))?;
+    let text = scene
+        .to_toml()
+        .map_err(|e| SynthError::Invalid(format!("scene.toml: {e}")))?;
     std::fs::write(&path, text).map_err(|source| SynthError::Write { path, source })
 }

@@ -46,13 +46,14 @@ struct Spot {
 }
 
 impl Spot {
-    fn new(l: &Spotlight) -> Spot {
+    /// `l` pointing along `direction` (any length above 0).
+    fn new(l: &Spotlight, direction: [f32; 3]) -> Spot {
         let half_beam = l.beam.to_radians() / 2.0;
         let half_field = l.field.to_radians() / 2.0;
         let gel = l.gel.unwrap_or([1.0; 3]).map(srgb_to_linear);
         Spot {
             pos: V3::from(l.position),
-            axis: (V3::from(l.aim) - V3::from(l.position)).norm(),
+            axis: V3::from(direction).norm(),
             cos_beam: half_beam.cos(),
             cos_field: half_field.cos(),
             half_beam,
@@ -116,9 +117,10 @@ impl Renderer {
         }
     }
 
-    /// Linear RGB radiance (times the exposure scale) of the stage lit by `light` alone, row-major.
-    pub fn render(&self, light: &Spotlight) -> Vec<[f32; 3]> {
-        let spot = Spot::new(light);
+    /// Linear RGB radiance (times the exposure scale) of the stage lit by `light` alone,
+    /// pointing along `direction`, row-major.
+    pub fn render(&self, light: &Spotlight, direction: [f32; 3]) -> Vec<[f32; 3]> {
+        let spot = Spot::new(light, direction);
         let vpls = self.bounce_lights(&spot);
         let n = SUBPIXELS.len();
         // Averaging the subpixels and dividing by pi (Lambert) folded into one factor.

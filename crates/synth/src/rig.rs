@@ -1,6 +1,8 @@
 //! The rig file: what `synth` reads, and the checks that turn a typo into one clear line.
 
 use serde::Deserialize;
+use visobjd_scene::profile::{Profile, ProfileFile};
+use visobjd_scene::{MAX_PALETTE, MAX_POSITIONS};
 
 use super::SynthError;
 
@@ -35,6 +37,10 @@ pub struct VirtualStage {
     /// The lights, in the order their basis images are numbered.
     #[serde(default, rename = "light")]
     pub lights: Vec<Spotlight>,
+    /// Fixture types beside the built-ins, as scene.toml's `[[profile]]` tables (a moving
+    /// light needs one: no built-in pans or tilts); copied to `scene.toml`.
+    #[serde(default, rename = "profile")]
+    pub profiles: Vec<ProfileFile>,
 }
 
 /// The stage floor (y = 0, x centred on 0, z from 0 at the downstage edge to `depth`), with
@@ -155,7 +161,8 @@ pub struct Spotlight {
     pub name: Option<String>,
     /// Light group ("system"), copied to `scene.toml`.
     pub group: Option<String>,
-    /// Built-in fixture profile (`dimmer`, `dimmer16`, `rgb`, `irgb`, `rgbw`, `irgbw`, `rgba`).
+    /// Fixture profile: a built-in (`dimmer`, `dimmer16`, `rgb`, `irgb`, `rgbw`, `irgbw`,
+    /// `rgba`) or a `[[profile]]` of the rig.
     pub profile: String,
     /// DMX universe, 1..=63999.
     pub universe: u32,
@@ -163,8 +170,11 @@ pub struct Spotlight {
     pub address: u32,
     /// Lamp position in metres.
     pub position: [f32; 3],
-    /// Point the beam centre passes through.
-    pub aim: [f32; 3],
+    /// Point the beam centre passes through (a fixed light; a moving light has `focus`).
+    pub aim: Option<[f32; 3]>,
+    /// A moving light's focus palettes (`[[light.focus]]`), one basis image each.
+    #[serde(default)]
+    pub focus: Vec<Focus>,
     /// Full angle in degrees inside which the beam is at full intensity.
     pub beam: f32,
     /// Full angle in degrees at which the beam has faded to zero (>= beam).
@@ -174,6 +184,64 @@ pub struct Spotlight {
     /// Gel colour, sRGB 0..1, for conventional (`dimmer`, `dimmer16`) fixtures only: colour
     /// mixing fixtures are captured white and coloured at render time.
     pub gel: Option<[f32; 3]>,
+}
+
+/// One focus palette of a moving light: the stage point it aims at there.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Focus {
+    /// Focus palette number (1..=9999), shared by the lights that have it.
+    pub palette: u32,
+    /// Its label, the same on every light that names it.
+    pub name: Option<String>,
+    /// The point the beam centre passes through in this position.
+    pub aim: [f32; 3],
+}
+
+impl Spotlight {
+    /// Unit beam directions, one per basis image: towards `aim` for a fixed light, and for
+    /// a moving light the direction its pan and tilt for each focus give ([`pan_tilt`],
+    /// [`beam_direction`]), so the image shows what those DMX values would.
+    pub fn directions(&self) -> Vec<[f32; 3]> {
+        match self.aim {
+            Some(aim) => vec![sub(aim, self.position)],
+            None => self
+                .focus
+                .iter()
+                .map(|f| {
+                    let (pan, tilt) = pan_tilt(self.position, f.aim);
+                    beam_direction(pan, tilt)
+                })
+                .collect(),
+        }
+    }
+}
+
+/// The pan and tilt in degrees, rounded to 0.01, that point a moving light at
+/// `position` at `aim`. A mover hangs pointing straight down: tilt is the angle away
+/// from straight down (0..=180), pan the turn about the vertical, 0 tilting the beam
+/// downstage (-z) and 90 towards +x ([`beam_direction`] is the inverse). Straight down
+/// has pan 0.
+pub fn pan_tilt(position: [f32; 3], aim: [f32; 3]) -> (f64, f64) {
+    let d = sub(aim, position).map(f64::from);
+    let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+    let tilt = (-d[1] / len).clamp(-1.0, 1.0).acos().to_degrees();
+    let pan = if d[0].hypot(d[2]) < 1e-9 * len {
+        0.0
+    } else {
+        d[0].atan2(-d[2]).to_degrees()
+    };
+    // `+ 0.0` turns -0.0 into 0.0, which scene.toml would otherwise spell `-0.0`.
+    let round = |v: f64| (v * 100.0).round() / 100.0 + 0.0;
+    (round(pan), round(tilt))
+}
+
+/// The unit beam direction of a moving light hung pointing down at `pan` and `tilt`
+/// degrees: `(sin tilt sin pan, -cos tilt, -sin tilt cos pan)` (see [`pan_tilt`]).
+pub fn beam_direction(pan: f64, tilt: f64) -> [f32; 3] {
+    let (sp, cp) = pan.to_radians().sin_cos();
+    let (st, ct) = tilt.to_radians().sin_cos();
+    [(st * sp) as f32, (-ct) as f32, (-st * cp) as f32]
 }
 
 /// Largest image accepted (UHD): the camera's view takes about 160 bytes a pixel, so this
@@ -273,6 +341,16 @@ impl VirtualStage {
         if self.lights.is_empty() {
             return bad("the rig has no [[light]]".into());
         }
+        for (i, p) in self.profiles.iter().enumerate() {
+            if Profile::built_in(&p.name).is_some()
+                || self.profiles[..i].iter().any(|o| o.name == p.name)
+            {
+                return bad(format!("profile `{}` is defined twice", p.name));
+            }
+            Profile::from_file(p).map_err(SynthError::Invalid)?;
+        }
+        // Focus palette number -> (its name, the light that named it).
+        let mut palettes: std::collections::HashMap<u32, (String, String)> = Default::default();
         // (universe, slot) -> light index, to report overlaps by name.
         let mut slots = std::collections::HashMap::new();
         let mut channels = std::collections::HashMap::new();
@@ -288,17 +366,14 @@ impl VirtualStage {
                     label("light", j, &self.lights[j].name)
                 ));
             }
-            let Some(fp) =
-                visobjd_scene::profile::Profile::built_in(&l.profile).map(|p| p.footprint() as u32)
-            else {
+            let Some(profile) = self.profile(&l.profile) else {
                 return bad(format!(
-                    "{what}: unknown profile `{}` ({})",
+                    "{what}: unknown profile `{}` ({}, or a [[profile]] of the rig)",
                     l.profile,
-                    visobjd_scene::profile::Profile::built_in_names()
-                        .collect::<Vec<_>>()
-                        .join(", ")
+                    Profile::built_in_names().collect::<Vec<_>>().join(", ")
                 ));
             };
+            let fp = profile.footprint() as u32;
             if !(1..=63999).contains(&l.universe) {
                 return bad(format!(
                     "{what}: universe {} is outside 1..=63999",
@@ -321,10 +396,29 @@ impl VirtualStage {
                 }
             }
             finite(&format!("{what} position"), &l.position)?;
-            finite(&format!("{what} aim"), &l.aim)?;
-            let d = sub(l.aim, l.position);
-            if dot(d, d) < 1e-8 {
-                return bad(format!("{what} aims at its own position"));
+            match (l.aim, profile.is_moving()) {
+                (Some(aim), false) => {
+                    finite(&format!("{what} aim"), &aim)?;
+                    if !l.focus.is_empty() {
+                        return bad(format!(
+                            "{what}: [[light.focus]] is for a moving light, and profile `{}` has no pan and tilt slots",
+                            l.profile
+                        ));
+                    }
+                }
+                (None, false) => return bad(format!("{what}: no `aim`")),
+                (Some(_), true) => {
+                    return bad(format!(
+                        "{what}: a moving light (profile `{}`) is aimed by its [[light.focus]] tables, not `aim`",
+                        l.profile
+                    ));
+                }
+                (None, true) => self.check_focus(&what, l, &profile, &mut palettes)?,
+            }
+            for d in l.directions() {
+                if dot(d, d) < 1e-8 {
+                    return bad(format!("{what} aims at its own position"));
+                }
             }
             if !(l.beam > 0.0 && l.beam < 180.0) {
                 return bad(format!(
@@ -345,7 +439,7 @@ impl VirtualStage {
                 ));
             }
             if let Some(g) = l.gel {
-                if !l.profile.starts_with("dimmer") {
+                if profile.has_colour() {
                     return bad(format!(
                         "{what}: a gel only suits a conventional fixture (dimmer, dimmer16), not `{}`",
                         l.profile
@@ -353,6 +447,80 @@ impl VirtualStage {
                 }
                 if g.iter().any(|v| !(0.0..=1.0).contains(v)) {
                     return bad(format!("{what}: gel components must be within 0..1"));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The profile called `name`: a built-in or one of the rig's (checked) `[[profile]]`s.
+    pub fn profile(&self, name: &str) -> Option<Profile> {
+        Profile::built_in(name).or_else(|| {
+            let file = self.profiles.iter().find(|p| p.name == name)?;
+            Profile::from_file(file).ok()
+        })
+    }
+
+    /// A moving light's focus palettes: at least one, numbered 1..=9999 once each, aimed
+    /// at finite points its pan and tilt reach, and named as other lights name them
+    /// (`palettes` holds the names so far).
+    fn check_focus(
+        &self,
+        what: &str,
+        l: &Spotlight,
+        profile: &Profile,
+        palettes: &mut std::collections::HashMap<u32, (String, String)>,
+    ) -> Result<(), SynthError> {
+        let bad = |m: String| Err(SynthError::Invalid(m));
+        if l.focus.is_empty() {
+            return bad(format!(
+                "{what}: a moving light needs at least one [[light.focus]] (palette, aim)"
+            ));
+        }
+        if l.focus.len() > MAX_POSITIONS {
+            return bad(format!(
+                "{what}: {} focus palettes; a light holds at most {MAX_POSITIONS}",
+                l.focus.len()
+            ));
+        }
+        for (k, f) in l.focus.iter().enumerate() {
+            let n = f.palette;
+            if !(1..=MAX_PALETTE).contains(&n) {
+                return bad(format!(
+                    "{what}: focus palette {n} is not a palette number (1-{MAX_PALETTE})"
+                ));
+            }
+            if l.focus[..k].iter().any(|o| o.palette == n) {
+                return bad(format!("{what}: focus palette {n} is listed twice"));
+            }
+            finite(&format!("{what} focus palette {n} aim"), &f.aim)?;
+            let d = sub(f.aim, l.position);
+            if dot(d, d) < 1e-8 {
+                return bad(format!(
+                    "{what}: focus palette {n} aims at its own position"
+                ));
+            }
+            let (pan, tilt) = pan_tilt(l.position, f.aim);
+            for (axis, v, range) in [
+                ("pan", pan, profile.pan_range),
+                ("tilt", tilt, profile.tilt_range),
+            ] {
+                if v.abs() > range / 2.0 {
+                    return bad(format!(
+                        "{what}: focus palette {n} needs {axis} {v} degrees, outside profile `{}`'s {axis}_range {range} (-{h}..={h})",
+                        l.profile,
+                        h = range / 2.0
+                    ));
+                }
+            }
+            if let Some(name) = f.name.as_deref().map(str::trim).filter(|n| !n.is_empty()) {
+                let (had, by) = palettes
+                    .entry(n)
+                    .or_insert_with(|| (name.to_string(), what.to_string()));
+                if had != name {
+                    return bad(format!(
+                        "{what}: focus palette {n} is `{name}` here but `{had}` on {by}: a palette has one name"
+                    ));
                 }
             }
         }

@@ -286,3 +286,229 @@ fn synth_errors_name_the_file() {
     assert!(!dir.join("out").exists(), "wrote output for a bad rig");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A 96x54 view from downstage and above, looking at the floor point (0, 0, 4), with a
+/// moving-light profile.
+const MOVER_STAGE: &str = r#"
+name = "movers"
+width = 96
+height = 54
+
+[stage]
+width = 8.0
+depth = 8.0
+albedo = [0.5, 0.5, 0.5]
+
+[camera]
+position = [0.0, 6.0, -1.0]
+look_at = [0.0, 0.0, 4.0]
+fov = 50.0
+
+[[profile]]
+name = "mover"
+channels = ["intensity", "pan16", "tilt16", "red", "green", "blue", "white"]
+tilt_range = 200.0
+"#;
+
+/// A mover hung at `position` with focus palettes `(palette, name, aim)`.
+fn mover(
+    channel: u32,
+    address: u32,
+    position: [f32; 3],
+    focus: &[(u32, &str, [f32; 3])],
+) -> String {
+    let mut t = format!(
+        "[[light]]\nchannel = {channel}\nprofile = \"mover\"\nuniverse = 1\naddress = {address}\n\
+         position = {position:?}\nbeam = 10.0\nfield = 16.0\nintensity = 1000.0\n"
+    );
+    for (palette, name, aim) in focus {
+        t += &format!("[[light.focus]]\npalette = {palette}\nname = \"{name}\"\naim = {aim:?}\n");
+    }
+    t
+}
+
+/// Where the floor point `p` lands in the `MOVER_STAGE` camera's image, in pixels: a
+/// pinhole with +y up, worked out here from the camera's numbers.
+fn project(p: [f32; 3]) -> (f32, f32) {
+    let (eye, at, fov, w, h) = ([0.0f32, 6.0, -1.0], [0.0f32, 0.0, 4.0], 50.0f32, 96.0, 54.0);
+    let sub = |a: [f32; 3], b: [f32; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    let dot = |a: [f32; 3], b: [f32; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    let unit = |a: [f32; 3]| {
+        let l = dot(a, a).sqrt();
+        a.map(|v| v / l)
+    };
+    let fwd = unit(sub(at, eye));
+    // The camera's right is fwd x up, its up right x fwd.
+    let right = unit([-fwd[2], 0.0, fwd[0]]);
+    let up = [
+        right[1] * fwd[2] - right[2] * fwd[1],
+        right[2] * fwd[0] - right[0] * fwd[2],
+        right[0] * fwd[1] - right[1] * fwd[0],
+    ];
+    let d = sub(p, eye);
+    let th = (fov.to_radians() / 2.0).tan();
+    let tw = th * w / h;
+    let u = dot(d, right) / dot(d, fwd) / tw;
+    let v = dot(d, up) / dot(d, fwd) / th;
+    ((u + 1.0) / 2.0 * w, (1.0 - v) / 2.0 * h)
+}
+
+/// The luminance-weighted centre, in pixels, of the pixels above a fifth of the brightest.
+fn centroid(img: &[[f32; 3]], w: usize) -> (f32, f32) {
+    let lum: Vec<f32> = img.iter().map(|&p| luminance(p)).collect();
+    let max = lum.iter().copied().fold(0.0, f32::max);
+    assert!(max > 0.0, "a black image");
+    let (mut sx, mut sy, mut sw) = (0.0, 0.0, 0.0);
+    for (i, &l) in lum.iter().enumerate() {
+        if l > max / 5.0 {
+            sx += l * ((i % w) as f32 + 0.5);
+            sy += l * ((i / w) as f32 + 0.5);
+            sw += l;
+        }
+    }
+    (sx / sw, sy / sw)
+}
+
+fn read_exr(path: &Path) -> (usize, Vec<[f32; 3]>) {
+    let image = exr::prelude::read_first_rgba_layer_from_file(
+        path,
+        |res, _| (res.width(), vec![[0.0f32; 3]; res.width() * res.height()]),
+        |(w, px), pos, (r, g, b, _a): (f32, f32, f32, f32)| px[pos.y() * *w + pos.x()] = [r, g, b],
+    )
+    .unwrap_or_else(|e| panic!("{} does not decode: {e}", path.display()));
+    image.layer_data.channel_data.pixels
+}
+
+#[test]
+fn a_mover_renders_one_image_per_focus_lit_where_it_aims() {
+    let dir = scratch("mover");
+    let (left, right) = ([-1.5f32, 0.0, 3.5], [1.5f32, 0.0, 4.5]);
+    let hung = [0.0f32, 4.0, 4.0];
+    let rig = write_rig(
+        &dir,
+        &format!(
+            "{MOVER_STAGE}{}",
+            mover(5, 1, hung, &[(1, "left", left), (2, "right", right)])
+        ),
+    );
+    let out = dir.join("out");
+    let report = synth(&rig, &out).expect("synth");
+    assert_eq!((report.lights, report.images), (1, 2));
+
+    let text = std::fs::read_to_string(out.join("scene.toml")).expect("scene.toml");
+    let scene: toml::Table = text.parse().expect("scene.toml is TOML");
+    let light = scene["light"][0].as_table().expect("the light");
+    assert!(
+        !light.contains_key("basis"),
+        "a mover has one image per position"
+    );
+    let positions = light["position"].as_array().expect("[[light.position]]");
+    assert_eq!(positions.len(), 2);
+    for (p, (palette, name, aim)) in positions
+        .iter()
+        .zip([(1, "left", left), (2, "right", right)])
+    {
+        assert_eq!(p["palette"].as_integer(), Some(palette));
+        assert_eq!(p["name"].as_str(), Some(name));
+        assert_eq!(
+            p["basis"].as_str(),
+            Some(format!("basis/001-fp{palette:02}.exr").as_str())
+        );
+        // Tilt from straight down: the horizontal run over the drop; pan: the heading of
+        // the run, 0 downstage (-z), +90 towards +x.
+        let (dx, dz) = (f64::from(aim[0] - hung[0]), f64::from(aim[2] - hung[2]));
+        let run = dx.hypot(dz);
+        let tilt = (run / f64::from(hung[1] - aim[1])).atan().to_degrees();
+        let pan = dx.signum() * (-dz / run).acos().to_degrees();
+        let (got_pan, got_tilt) = (
+            p["pan"].as_float().expect("pan"),
+            p["tilt"].as_float().expect("tilt"),
+        );
+        assert!(
+            (got_pan - pan).abs() <= 0.005,
+            "pan {got_pan}, expected {pan}"
+        );
+        assert!(
+            (got_tilt - tilt).abs() <= 0.005,
+            "tilt {got_tilt}, expected {tilt}"
+        );
+        // Each image is lit where its aim point is in the camera's view.
+        let (w, img) = read_exr(&out.join(p["basis"].as_str().expect("basis")));
+        let (cx, cy) = centroid(&img, w);
+        let (ax, ay) = project(aim);
+        assert!(
+            (cx - ax).abs() < 1.5 && (cy - ay).abs() < 1.5,
+            "palette {palette}: lit around ({cx}, {cy}), its aim is at ({ax}, {ay})"
+        );
+    }
+    // The two aims are apart in the image, the left one (-x) to the camera's right.
+    let (l, r) = (project(left), project(right));
+    assert!(l.0 - r.0 > 15.0, "{l:?} {r:?}");
+    // What synth writes loads as a scene with palettes 1 and 2 on that light.
+    let loaded = visobjd_scene::Scene::load(&out).expect("the scene loads");
+    let numbers: Vec<u32> = loaded.palettes.iter().map(|p| p.number).collect();
+    assert_eq!(numbers, [1, 2]);
+    assert!(loaded.lights[0].is_moving());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn bad_movers_give_one_clear_line() {
+    let hung = [0.0f32, 4.0, 4.0];
+    let one = mover(5, 1, hung, &[(1, "left", [-1.5, 0.0, 3.5])]);
+    let with = |text: &str| rig_error(&format!("{MOVER_STAGE}{text}"));
+
+    let msg = with(&one.replace("position = [0.0", "aim = [0.0, 0.0, 4.0]\nposition = [0.0"));
+    assert_eq!(
+        msg,
+        "light 1: a moving light (profile `mover`) is aimed by its [[light.focus]] tables, not `aim`"
+    );
+    let msg = with(&mover(5, 1, hung, &[]));
+    assert_eq!(
+        msg,
+        "light 1: a moving light needs at least one [[light.focus]] (palette, aim)"
+    );
+    let msg = with(&one.replace("aim = [-1.5", "aim = [nan"));
+    assert_eq!(msg, "light 1 focus palette 1 aim: numbers must be finite");
+    let msg = with(&one.replace("aim = [-1.5, 0.0, 3.5]", "aim = [0.0, 4.0, 4.0]"));
+    assert_eq!(msg, "light 1: focus palette 1 aims at its own position");
+    // tilt_range 200: at most 100 degrees from straight down; a point level with the
+    // lamp and above it is out of reach.
+    let msg = with(&one.replace("aim = [-1.5, 0.0, 3.5]", "aim = [-1.0, 5.0, 4.0]"));
+    assert!(
+        msg.starts_with("light 1: focus palette 1 needs tilt 135 degrees, outside profile `mover`'s tilt_range 200 (-100..=100)"),
+        "{msg}"
+    );
+    let msg = with(&mover(5, 1, hung, &[(0, "x", [-1.5, 0.0, 3.5])]));
+    assert!(
+        msg.contains("focus palette 0 is not a palette number (1-9999)"),
+        "{msg}"
+    );
+    let msg = with(&mover(
+        5,
+        1,
+        hung,
+        &[(3, "a", [-1.5, 0.0, 3.5]), (3, "b", [1.5, 0.0, 3.5])],
+    ));
+    assert_eq!(msg, "light 1: focus palette 3 is listed twice");
+    let two = format!(
+        "{one}{}",
+        mover(6, 20, [1.0, 4.0, 4.0], &[(1, "DS left", [1.0, 0.0, 2.0])])
+    );
+    assert_eq!(
+        with(&two),
+        "light 2: focus palette 1 is `DS left` here but `left` on light 1: a palette has one name"
+    );
+    let fixed = light([0.0, 3.0, 4.0], [0.0, 0.0, 4.0])
+        + "[[light.focus]]\npalette = 1\naim = [0.0, 0.0, 4.0]\n";
+    assert_eq!(
+        with(&fixed),
+        "light 1: [[light.focus]] is for a moving light, and profile `dimmer` has no pan and tilt slots"
+    );
+    let msg = with(&format!(
+        "{one}[[profile]]\nname = \"mover\"\nchannels = [\"intensity\"]\n"
+    ));
+    assert_eq!(msg, "profile `mover` is defined twice");
+    let msg = with(&one.replace("profile = \"mover\"", "profile = \"mover2\""));
+    assert!(msg.contains("unknown profile `mover2`"), "{msg}");
+}
