@@ -172,18 +172,17 @@ fn an_objective_aimed_at_one_side_aims_the_movers_there() {
                 .map_or(light.basis.clone(), |p| p.basis.clone());
             let img = read_exr(&path).expect("the image reads");
             for (w, p) in want.iter_mut().zip(&img.pixels) {
-                for c in 0..3 {
-                    w[c] += look.levels[l].intensity * p[c];
+                for (w, v) in w.iter_mut().zip(p) {
+                    *w += look.levels[l].intensity * v;
                 }
             }
         }
         for (i, (w, g)) in want.iter().zip(got.pixels()).enumerate() {
-            for c in 0..3 {
-                let code = encode_srgb8(w[c] * stage.gain);
+            for (c, (&w, &got)) in w.iter().zip(&g.0).enumerate() {
+                let code = encode_srgb8(w * stage.gain);
                 assert!(
-                    code.abs_diff(g.0[c]) <= 1,
-                    "pixel {i} channel {c}: {} vs {code}",
-                    g.0[c]
+                    code.abs_diff(got) <= 1,
+                    "pixel {i} channel {c}: {got} vs {code}"
                 );
             }
         }
