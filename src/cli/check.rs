@@ -69,7 +69,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let each: Vec<String> = stage
             .unseen
             .iter()
-            .map(|u| format!("  light {}: {}", scene.lights[u.light].channel, u.error))
+            .map(|u| {
+                let light = &scene.lights[u.light];
+                let missing: Vec<String> = light
+                    .positions
+                    .iter()
+                    .filter(|p| !p.basis.is_file())
+                    .map(|p| format!("palette {} ({})", p.palette, p.basis.display()))
+                    .collect();
+                match missing.as_slice() {
+                    [] => format!("  light {}: {}", light.channel, u.error),
+                    _ => format!(
+                        "  light {}: no image for {} (capture shoots them: `visobjd capture`)",
+                        light.channel,
+                        missing.join(", ")
+                    ),
+                }
+            })
             .collect();
         anyhow::bail!(
             "{} of {} lights have a basis image that cannot be used (the daemon would leave them out of generation):\n{}",
@@ -104,7 +120,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             approximate.push(light.channel);
         }
     }
-    let emitter_images: usize = scene.lights.iter().map(|l| l.emitter_basis.len()).sum();
     let out = &config.output;
     let line = |k: &str, v: String| print!("{}", wrap(k, &v));
     line("config", format!("{} ok", config.path.display()));
@@ -140,7 +155,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "images",
         format!(
             "{} basis images, all readable; kept at {}x{} and {}x{}",
-            scene.lights.len() + emitter_images,
+            stage.thumbs.images,
             stage.thumbs.width,
             stage.thumbs.height,
             stage.proxy.width,
@@ -162,6 +177,34 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             ));
         }
         line("colour", colour.join("; "));
+    }
+    let movers: Vec<u32> = scene
+        .lights
+        .iter()
+        .filter(|l| l.is_moving())
+        .map(|l| l.channel)
+        .collect();
+    if !movers.is_empty() {
+        let palettes: Vec<String> = scene
+            .palettes
+            .iter()
+            .map(|p| {
+                format!(
+                    "{} on {}",
+                    p.describe(),
+                    visobjd_rig::channel_list(&channels(scene, &p.lights))
+                )
+            })
+            .collect();
+        line(
+            "movers",
+            format!(
+                "{}, {} focus palettes: {}",
+                visobjd_rig::channel_list(&movers),
+                scene.palettes.len(),
+                palettes.join(", ")
+            ),
+        );
     }
     line(
         "memory",
@@ -315,6 +358,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+/// The channels of lights `lights` (indices into the scene's lights).
+fn channels(scene: &Scene, lights: &[usize]) -> Vec<u32> {
+    lights.iter().map(|&l| scene.lights[l].channel).collect()
 }
 
 /// Width of a booth screen's terminal: lines are kept shorter.

@@ -497,6 +497,50 @@ fn check_lists_every_unusable_basis_image() {
 }
 
 #[test]
+fn check_names_the_movers_their_palettes_and_every_missing_image() {
+    let dir = temp_dir("cli-check-movers");
+    let scene = stripes(&dir.join("scene"), 2, false);
+    let config = dir.join("visobjd.toml");
+    std::fs::write(&config, "scene = \"scene\"\n").unwrap();
+    let mut toml = std::fs::read_to_string(scene.join("scene.toml")).unwrap();
+    toml += "[[profile]]\nname = \"spot\"\nchannels = [\"intensity\", \"pan16\", \"tilt16\"]\n\
+             [[light]]\nchannel = 9\nprofile = \"spot\"\nuniverse = 2\naddress = 1\n";
+    for (n, name) in [(1, "front"), (2, "back"), (3, "cyc")] {
+        toml += &format!(
+            "[[light.position]]\npalette = {n}\nname = \"{name}\"\npan = {}\ntilt = 10.0\nbasis = \"basis/009-fp{n}.exr\"\n",
+            n * 10
+        );
+    }
+    std::fs::write(scene.join("scene.toml"), toml).unwrap();
+    std::fs::copy(scene.join("basis/001.exr"), scene.join("basis/009-fp1.exr")).unwrap();
+    let out = run(&["check", "--config", s(&config)]);
+    fails_with(&out, "1 of 3 lights have a basis image that cannot be used");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("light 9: no image for palette 2 (")
+            && err.contains("009-fp2.exr), palette 3 (")
+            && err.contains("009-fp3.exr)"),
+        "{err}"
+    );
+    for n in [2, 3] {
+        std::fs::copy(
+            scene.join("basis/002.exr"),
+            scene.join(format!("basis/009-fp{n}.exr")),
+        )
+        .unwrap();
+    }
+    let out = run(&["check", "--config", s(&config)]);
+    succeeded(&out);
+    let text = String::from_utf8_lossy(&out.stdout);
+    let text = text.split_whitespace().collect::<Vec<_>>().join(" ");
+    assert!(text.contains("5 basis images, all readable"), "{text}");
+    assert!(
+        text.contains("movers channel 9, 3 focus palettes: 1 \"front\" on channel 9, 2 \"back\""),
+        "{text}"
+    );
+}
+
+#[test]
 fn check_says_when_the_references_would_refuse_uploads() {
     let dir = temp_dir("cli-check-refs");
     stripes(&dir.join("scene"), 2, false);
