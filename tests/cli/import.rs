@@ -10,6 +10,7 @@ use std::process::{Command, Output};
 use std::time::{Duration, Instant};
 
 use crate::common::bin;
+use visobjd_scene::profile::Slot;
 use visobjd_testkit::{temp_dir, tools, write_exr};
 
 const PAR: &str = "BlenderDMX@LED_PAR_64_RGBW@v0.3.gdtf";
@@ -783,11 +784,19 @@ fn the_demo_rig_round_trips_through_mvr() {
                 })
                 .collect(),
         };
-        assert_eq!(
-            pa.quantise(&pa.levels(&look, 1.0)),
-            pb.quantise(&pb.levels(&look, 1.0))
-        );
+        // Every slot the same but a mover's pan and tilt: its positions come from synth,
+        // not from the MVR, so the import holds it at centre.
+        let slots = |p: &visobjd_dmx::Patch| -> Vec<Vec<(Slot, f32)>> {
+            p.light_slots(&p.levels(&look, 1.0))
+                .into_iter()
+                .map(|l| l.into_iter().filter(|(s, _)| !s.is_position()).collect())
+                .collect()
+        };
+        assert_eq!(slots(&pa), slots(&pb));
+        assert_eq!(pa.universes(), pb.universes());
     }
+    let movers = original.lights.iter().filter(|l| l.is_moving()).count();
+    assert!(movers >= 6, "the demo's movers: {movers}");
 }
 
 // ---- Eos: a CSV patch export, and the console live over OSC TCP ----
