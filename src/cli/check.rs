@@ -155,7 +155,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "images",
         format!(
             "{} basis images, all readable; kept at {}x{} and {}x{}",
-            stage.thumbs.images,
+            stage.thumbs.images - stage.unseen_positions.len(),
             stage.thumbs.width,
             stage.thumbs.height,
             stage.proxy.width,
@@ -203,6 +203,33 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 visobjd_rig::channel_list(&movers),
                 scene.palettes.len(),
                 palettes.join(", ")
+            ),
+        );
+    }
+    if !stage.unseen_positions.is_empty() {
+        let each: Vec<String> = stage
+            .unseen_positions
+            .iter()
+            .map(|u| {
+                let light = &scene.lights[u.light];
+                let file = light
+                    .positions
+                    .iter()
+                    .find(|p| p.palette == u.palette)
+                    .map_or(String::new(), |p| format!(" ({})", p.basis.display()));
+                format!("light {} palette {}{file}", light.channel, u.palette)
+            })
+            .collect();
+        line(
+            "missing",
+            format!(
+                "{} left out of generation until captured (`visobjd capture` shoots them): {}",
+                if each.len() == 1 {
+                    "a position is"
+                } else {
+                    "positions are"
+                },
+                each.join(", ")
             ),
         );
     }

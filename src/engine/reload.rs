@@ -56,6 +56,14 @@ impl Loaded {
                         u.error
                     );
                 }
+                for u in &stage.unseen_positions {
+                    tracing::warn!(
+                        "light {} palette {} is left out of generation until its image is captured: {}",
+                        stage.scene.lights[u.light].channel,
+                        u.palette,
+                        u.error
+                    );
+                }
                 Loaded {
                     stage: Arc::new(stage),
                     problem: None,
@@ -120,6 +128,7 @@ impl Fingerprint {
         for l in &scene.lights {
             files.push(&l.basis);
             files.extend(l.emitter_basis.iter().map(PathBuf::as_path));
+            files.extend(l.positions.iter().skip(1).map(|p| p.basis.as_path()));
         }
         Fingerprint(files.into_iter().map(stat).collect())
     }

@@ -466,6 +466,19 @@ pub struct Unseen {
     pub error: SceneError,
 }
 
+/// A moving light's position (not its first) whose image cannot be used: the position is
+/// left out of [`BasisImages::positions`], so generation never draws it, while the light's
+/// other positions work (a palette learned from the console has no image until captured).
+#[derive(Debug)]
+pub struct UnseenPosition {
+    /// The light (index into the scene's lights).
+    pub light: usize,
+    /// The focus palette.
+    pub palette: u32,
+    /// Why, naming the file.
+    pub error: SceneError,
+}
+
 /// What [`load`] made of a scene's images.
 #[derive(Debug)]
 pub struct Loaded {
@@ -473,6 +486,8 @@ pub struct Loaded {
     pub images: Vec<BasisImages>,
     /// The lights whose images could not be used, in light order.
     pub unseen: Vec<Unseen>,
+    /// Movers' positions whose images could not be used, in light order.
+    pub unseen_positions: Vec<UnseenPosition>,
 }
 
 impl Loaded {
@@ -544,7 +559,8 @@ pub fn load(scene: &Scene, widths: &[(usize, Precision)]) -> Result<Loaded, Scen
         })
         .collect();
     // Then a moving light's other positions (its first is its white image).
-    let positions: Vec<Vec<(u32, usize)>> = scene
+    let mut palette_of: Vec<Option<u32>> = vec![None; files.len()];
+    let mut positions: Vec<Vec<(u32, usize)>> = scene
         .lights
         .iter()
         .enumerate()
@@ -557,6 +573,7 @@ pub fn load(scene: &Scene, widths: &[(usize, Precision)]) -> Result<Loaded, Scen
                     held.push((p.palette, files.len()));
                     files.push(p.basis.as_path());
                     owner.push(l);
+                    palette_of.push(Some(p.palette));
                 }
             }
             held
@@ -626,14 +643,23 @@ pub fn load(scene: &Scene, widths: &[(usize, Precision)]) -> Result<Loaded, Scen
         })
         .collect();
     let mut overflow = false;
+    let mut unseen_positions = Vec::new();
     for (i, r) in results.into_iter().enumerate() {
-        match r {
-            Ok(o) => overflow |= o,
-            Err(error) => unseen.push(Unseen {
+        match (r, palette_of.get(i).copied().flatten()) {
+            (Ok(o), _) => overflow |= o,
+            (Err(error), Some(palette)) => unseen_positions.push(UnseenPosition {
+                light: owner[i],
+                palette,
+                error,
+            }),
+            (Err(error), None) => unseen.push(Unseen {
                 light: owner[i],
                 error,
             }),
         }
+    }
+    for u in &unseen_positions {
+        positions[u.light].retain(|&(n, _)| n != u.palette);
     }
     if overflow {
         let single: Vec<(usize, Precision)> = widths
@@ -668,7 +694,12 @@ pub fn load(scene: &Scene, widths: &[(usize, Precision)]) -> Result<Loaded, Scen
         img.colours.clone_from(&colours);
         img.positions.clone_from(&positions);
     }
-    Ok(Loaded { images, unseen })
+    unseen_positions.sort_by_key(|u| (u.light, u.palette));
+    Ok(Loaded {
+        images,
+        unseen,
+        unseen_positions,
+    })
 }
 
 #[cfg(test)]

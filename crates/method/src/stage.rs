@@ -7,7 +7,7 @@ use crate::gallery::{Generation, PROXY_WIDTH, Size};
 use crate::objective::Objective;
 use crate::sampler::{Constraints, LightGroups, Plan, Spread, Target};
 use crate::targeting::{Footprints, WORKING_WIDTH};
-use visobjd_compositor::basis::{self, BasisImages, Loaded, Precision, Unseen};
+use visobjd_compositor::basis::{self, BasisImages, Loaded, Precision, Unseen, UnseenPosition};
 use visobjd_compositor::render::{exposure_gain, render_srgb8};
 use visobjd_scene::look::Look;
 use visobjd_scene::{Scene, SceneError};
@@ -41,6 +41,9 @@ pub struct Stage {
     /// generation (each keeps its level in the base look, as a locked light does), so a
     /// generate never moves a light it cannot see.
     pub unseen: Vec<Unseen>,
+    /// Movers' positions whose images could not be used: never drawn (the light's other
+    /// positions are), and named by `visobjd check` and the daemon's log.
+    pub unseen_positions: Vec<UnseenPosition>,
 }
 
 impl Stage {
@@ -81,6 +84,7 @@ impl Stage {
         let Loaded {
             images: mut sizes,
             unseen,
+            unseen_positions,
         } = basis::load(
             &scene,
             &[
@@ -100,6 +104,7 @@ impl Stage {
             proxy,
             thumbs,
             unseen,
+            unseen_positions,
         })
     }
 
@@ -116,6 +121,7 @@ impl Stage {
             proxy: black(Precision::Single),
             thumbs: black(Precision::Half),
             unseen: Vec::new(),
+            unseen_positions: Vec::new(),
             scene,
         }
     }
@@ -255,6 +261,7 @@ mod tests {
             proxy: at(Precision::Single),
             thumbs: at(Precision::Half),
             unseen: Vec::new(),
+            unseen_positions: Vec::new(),
         }
     }
 

@@ -188,3 +188,43 @@ fn an_objective_aimed_at_one_side_aims_the_movers_there() {
         }
     }
 }
+
+#[test]
+fn a_position_without_an_image_is_never_drawn_and_the_rest_are() {
+    let dir = visobjd_testkit::temp_dir("method-movers-unseen");
+    write_stage(&dir);
+    std::fs::remove_file(dir.join("basis/11-3.exr")).expect("palette 4 of light 11");
+    let stage = Stage::from_scene(visobjd_scene::Scene::load(&dir).expect("scene"), 0)
+        .expect("the stage loads");
+    assert!(stage.unseen.is_empty(), "{:?}", stage.unseen);
+    let unseen: Vec<(usize, u32)> = stage
+        .unseen_positions
+        .iter()
+        .map(|u| (u.light, u.palette))
+        .collect();
+    assert_eq!(unseen, [(2, 4)]);
+    let obj = objective(Region::new(0.75, 0.0, 1.0, 1.0).expect("region"));
+    let g = stage.generate(
+        &GenerateRequest {
+            objectives: std::slice::from_ref(&obj),
+            constraints: &Constraints::none(&stage.rig),
+            base: &Look::off(stage.scene.lights.len()),
+            spread: Spread::default(),
+            count: 40,
+            clusters: 4,
+        },
+        &mut Rng::seed_from_u64(9),
+    );
+    let on = |l: usize, n: u32| {
+        g.candidates
+            .iter()
+            .filter(|c| c.levels[l].position == Some(n))
+            .count()
+    };
+    assert_eq!(
+        on(2, 4),
+        0,
+        "light 11 never on the palette it has no image for"
+    );
+    assert_eq!(on(3, 4), g.candidates.len(), "light 12 still goes there");
+}
