@@ -400,7 +400,7 @@ impl Patch {
             .iter()
             .enumerate()
             .map(|(i, light)| {
-                let (dimmer, colour) = read(light, bytes);
+                let (dimmer, colour, _) = read(light, bytes);
                 let model = real
                     .get(i)
                     .and_then(Option::as_ref)
@@ -424,13 +424,14 @@ impl Patch {
     /// dimmer: intensity is the dimmer, colour the emitters' colour at their brightness.
     /// Without one: intensity is the brightness and colour the emitters' colour (white
     /// when dark). CMY flags read as `1 - level`; a light without colour slots is white.
-    /// Colours are sRGB, as looks keep them.
+    /// Colours are sRGB, as looks keep them. A moving light is in the position nearest its
+    /// pan and tilt (as the paper's prototype showed a mover).
     pub fn look(&self, bytes: &[[u8; SLOTS]]) -> Look {
         let levels = self
             .lights
             .iter()
             .map(|light| {
-                let (dimmer, colour) = read(light, bytes);
+                let (dimmer, colour, aim) = read(light, bytes);
                 let (brightness, linear) = match colour {
                     Read::Emitters(levels) => {
                         let (t, c) = light.colour.read(&levels);
@@ -449,10 +450,17 @@ impl Patch {
                     Some(d) => (d, linear.map(|v| v * brightness)),
                     None => (brightness, linear),
                 };
+                // A mover is read as the palette nearest its pan and tilt.
+                let position = light
+                    .positions
+                    .iter()
+                    .map(|&(n, p)| (n, (p[0] - aim[0]).powi(2) + (p[1] - aim[1]).powi(2)))
+                    .min_by(|a, b| a.1.total_cmp(&b.1))
+                    .map(|(n, _)| n);
                 Level {
                     intensity: unit(intensity),
                     color: linear.map(|v| unit(linear_to_srgb(unit(v)))),
-                    position: None,
+                    position,
                 }
             })
             .collect();
@@ -468,14 +476,16 @@ enum Read {
     Linear([f32; 3]),
 }
 
-/// One light's DMX read back: its dimmer level if it has one, and its colour slots. A
-/// missing universe reads as zeros.
-fn read(light: &Placed, bytes: &[[u8; SLOTS]]) -> (Option<f32>, Read) {
+/// One light's DMX read back: its dimmer level if it has one, its colour slots, and its
+/// pan and tilt levels (0.5, centre, for an axis it lacks). A missing universe reads as
+/// zeros.
+fn read(light: &Placed, bytes: &[[u8; SLOTS]]) -> (Option<f32>, Read, [f32; 2]) {
     let dmx = bytes.get(light.universe);
     let byte = |i: usize| dmx.and_then(|d| d.get(i)).copied().map_or(0.0, f32::from);
     let mut dimmer = None;
     let mut emitters = Vec::with_capacity(light.colour.emitters());
     let mut flags = None::<[f32; 3]>;
+    let mut aim = [0.5f32; 2];
     let mut at = light.offset;
     for &slot in &light.slots {
         let v = if slot.is_wide() {
@@ -489,6 +499,8 @@ fn read(light: &Placed, bytes: &[[u8; SLOTS]]) -> (Option<f32>, Read) {
             Slot::Magenta => flags.get_or_insert([1.0; 3])[1] = 1.0 - v,
             Slot::Yellow => flags.get_or_insert([1.0; 3])[2] = 1.0 - v,
             Slot::Intensity | Slot::Intensity16 => dimmer = Some(v),
+            Slot::Pan | Slot::Pan16 => aim[0] = v,
+            Slot::Tilt | Slot::Tilt16 => aim[1] = v,
             _ => {}
         }
         at += slot.width();
@@ -498,7 +510,7 @@ fn read(light: &Placed, bytes: &[[u8; SLOTS]]) -> (Option<f32>, Read) {
     } else {
         Read::Emitters(emitters)
     };
-    (dimmer.filter(|_| light.has_intensity), colour)
+    (dimmer.filter(|_| light.has_intensity), colour, aim)
 }
 
 #[cfg(test)]
@@ -958,6 +970,17 @@ mod tests {
         assert_eq!(dim[13..15], first[13..15]);
         // A fixed light with pan and tilt slots stays at centre.
         assert_eq!(first[21..25], [128, 0, 128, 0]);
+        // Read back, the wire is in the palettes it was sent to, or the nearest.
+        let back = patch.look(&[b]);
+        assert_eq!(
+            [back.levels[0].position, back.levels[1].position],
+            [Some(2); 2]
+        );
+        let mut near = b;
+        // The spot's pan and tilt most of the way back towards palette 1's.
+        (near[1], near[3]) = (100, 160);
+        assert_eq!(patch.look(&[near]).levels[0].position, Some(1));
+        assert_eq!(back.levels[2].position, None, "a fixed light has none");
     }
 
     #[test]
