@@ -65,8 +65,9 @@ fn list_of(items: impl IntoIterator<Item = usize>) -> usize {
 
 /// What the bounds need of a scene: the JSON sizes of its channels and group names.
 struct Rig {
-    /// Per light: its channel's digits and whether it has colour.
-    lights: Vec<(usize, bool)>,
+    /// Per light: its channel's digits, whether it has colour, and whether it moves (a
+    /// look file gives its focus palette).
+    lights: Vec<(usize, bool, bool)>,
     /// Per group: its name as a JSON string.
     groups: Vec<usize>,
 }
@@ -78,7 +79,10 @@ impl Rig {
                 .lights
                 .iter()
                 .enumerate()
-                .map(|(i, l)| (l.channel.to_string().len(), scene.profile(i).has_colour()))
+                .map(|(i, l)| {
+                    let digits = l.channel.to_string().len();
+                    (digits, scene.profile(i).has_colour(), l.is_moving())
+                })
                 .collect(),
             groups: scene
                 .groups
@@ -96,7 +100,7 @@ impl Rig {
 
     /// Every light's channel, as a list of numbers.
     fn channels(&self) -> usize {
-        list_of(self.lights.iter().map(|&(digits, _)| digits))
+        list_of(self.lights.iter().map(|&(digits, ..)| digits))
     }
 
     /// Every group's name, as a list of strings.
@@ -106,7 +110,7 @@ impl Rig {
 
     /// A look file (`LookFile`) of every light, its label at most `label` characters.
     fn look(&self, label: usize) -> usize {
-        let entry = |&(digits, colour): &(usize, bool)| {
+        let entry = |&(digits, colour, moving): &(usize, bool, bool)| {
             2 + key("channel")
                 + digits
                 + key("intensity")
@@ -116,6 +120,7 @@ impl Rig {
                 } else {
                     0
                 }
+                + if moving { key("position") + U32 } else { 0 }
         };
         2 + key("label") + text(label) + key("lights") + list_of(self.lights.iter().map(entry))
     }
@@ -178,7 +183,7 @@ impl Rig {
         let by_light = |each: usize| {
             self.lights
                 .iter()
-                .map(move |&(digits, _)| 2 + key("channel") + digits + each)
+                .map(move |&(digits, ..)| 2 + key("channel") + digits + each)
         };
         let pin = 2
             + key("id")
@@ -276,15 +281,26 @@ mod tests {
     /// A scene with long group names, large channel numbers, and lights with and
     /// without colour.
     fn scene(lights: u32) -> Scene {
-        let mut toml = String::new();
+        let mut toml = String::from(
+            "[[profile]]\nname = \"spot\"\nchannels = [\"red\", \"green\", \"blue\", \"pan\", \"tilt\"]\n",
+        );
         for i in 0..lights {
             let group = format!("group \\\"{i}\\\" {}", "\u{e9}".repeat(30));
+            // Every fourth light a mover, in palette 9999 (the longest number).
+            let (profile, basis) = match i % 4 {
+                3 => ("spot", String::new()),
+                _ if i % 3 == 0 => ("dimmer", "basis = \"b.exr\"\n".to_string()),
+                _ => ("rgb", "basis = \"b.exr\"\n".to_string()),
+            };
             toml += &format!(
-                "[[group]]\nname = \"{group}\"\n[[light]]\nchannel = {}\nbasis = \"b.exr\"\nprofile = \"{}\"\nuniverse = {}\naddress = 1\ngroup = \"{group}\"\n",
+                "[[group]]\nname = \"{group}\"\n[[light]]\nchannel = {}\n{basis}profile = \"{profile}\"\nuniverse = {}\naddress = 1\ngroup = \"{group}\"\n",
                 4_000_000_000 - i,
-                if i % 3 == 0 { "dimmer" } else { "rgb" },
                 i + 1
             );
+            if profile == "spot" {
+                toml += "[[light.position]]\npalette = 1\npan = 0\ntilt = 0\nbasis = \"a.exr\"\n\
+                         [[light.position]]\npalette = 9999\npan = 1\ntilt = 1\nbasis = \"b.exr\"\n";
+            }
         }
         Scene::parse(std::path::Path::new("."), &toml).unwrap()
     }
@@ -298,7 +314,7 @@ mod tests {
                 .map(|i| Level {
                     intensity: LONG[(i + k) % 3],
                     color: [LONG[(i + k + 1) % 3], LONG[(i + k + 2) % 3], LONG[k % 3]],
-                    position: None,
+                    position: scene.lights[i].is_moving().then_some(9999),
                 })
                 .collect(),
         }
