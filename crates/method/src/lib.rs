@@ -9,6 +9,7 @@ pub mod constrain;
 pub mod decode;
 pub mod gallery;
 pub mod objective;
+pub mod preference;
 pub mod sampler;
 pub mod sheet;
 pub mod stage;
