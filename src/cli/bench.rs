@@ -507,6 +507,7 @@ fn generate_once(stage: &Stage, objective: &Objective, seed: u64) -> f64 {
             spread: Spread::default(),
             count: 100,
             clusters: 12,
+            steer: None,
         },
         &mut Rng::seed_from_u64(seed),
     );

@@ -153,6 +153,7 @@ pub fn run(args: Args, matches: &ArgMatches) -> anyhow::Result<()> {
             spread: Spread::default(),
             count: args.count as usize,
             clusters: args.clusters as usize,
+            steer: None,
         },
         &mut rng,
     );

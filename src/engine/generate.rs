@@ -242,6 +242,7 @@ impl Engine {
                         spread,
                         count: inputs.count,
                         clusters: inputs.clusters,
+                        steer: None,
                     },
                     &mut rand::rngs::Xoshiro256PlusPlus::seed_from_u64(seed),
                     progress,

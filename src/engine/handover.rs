@@ -95,6 +95,7 @@ impl GalleryFile {
             // Notes go to the requester of the main's generate, not to a backup.
             lit_for_color: Vec::new(),
             thumbnails: std::sync::Arc::new([]),
+            turned_down: 0,
         };
         Ok(Gallery {
             generation,
@@ -281,6 +282,7 @@ mod tests {
                 exhausted: false,
                 lit_for_color: Vec::new(),
                 thumbnails: std::sync::Arc::new([]),
+                turned_down: 0,
             },
             seed: 77,
             serial: 4,

@@ -407,6 +407,7 @@ mod tests {
                 exhausted: false,
                 lit_for_color: Vec::new(),
                 thumbnails: std::sync::Arc::new([]),
+                turned_down: 0,
             },
             seed: u64::MAX,
             serial: 1,

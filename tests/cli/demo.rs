@@ -73,6 +73,7 @@ fn gallery_brightness_follows_the_references() {
                 spread: Spread::default(),
                 count: 100,
                 clusters: 12,
+                steer: None,
             },
             &mut rand::rngs::Xoshiro256PlusPlus::seed_from_u64(1),
         );

@@ -8,6 +8,7 @@ use rand::Rng;
 use rayon::prelude::*;
 
 use crate::sampler::Plan;
+use crate::steer::Steer;
 use visobjd_compositor::basis::BasisImages;
 use visobjd_compositor::color::linear_to_lab_planar;
 #[cfg(target_arch = "x86_64")]
@@ -232,6 +233,8 @@ pub struct Generation {
     pub draws: usize,
     /// True if the draw bound ran out before `count` candidates were accepted.
     pub exhausted: bool,
+    /// Candidates the preference model turned down (0 unless steered).
+    pub turned_down: usize,
     /// Colour-only objectives (indices in request order) that took their reference's
     /// intensity too, the base leaving their lights dark ([`Plan::lit_for_color`]).
     pub lit_for_color: Vec<usize>,
@@ -308,12 +311,14 @@ pub fn generate<T: Send>(
     gain: f32,
     size: Size,
     rng: &mut (impl Rng + Send),
+    steering: Option<(&mut Steer, &[bool])>,
     reps: impl FnOnce(&[&Look]) -> T + Send,
     progress: &mut (dyn FnMut(f32) + Send),
 ) -> (Generation, T) {
     let mut drawing = Drawing {
         plan,
         base,
+        steering,
         proxy,
         gain,
         count: size.count,
@@ -344,9 +349,11 @@ pub fn generate<T: Send>(
         clustering,
         candidates,
         draws,
+        steering,
         ..
     } = drawing;
     let generation = Generation {
+        turned_down: steering.map_or(0, |(s, _)| s.turned_down()),
         exhausted: candidates.len() < size.count,
         lit_for_color: plan.lit_for_color().to_vec(),
         candidates,
@@ -363,6 +370,8 @@ pub fn generate<T: Send>(
 struct Drawing<'a, R> {
     plan: &'a Plan,
     base: &'a Look,
+    /// The steering by ratings, and the lights the constraints keep.
+    steering: Option<(&'a mut Steer, &'a [bool])>,
     proxy: &'a BasisImages,
     gain: f32,
     count: usize,
@@ -437,8 +446,12 @@ impl<R: Rng> Drawing<'_, R> {
         let want = (self.count - self.candidates.len())
             .clamp(1, BATCH)
             .min(self.max_draws - self.draws);
+        let (plan, base) = (self.plan, self.base);
         let looks: Vec<Look> = (0..want)
-            .map(|_| self.plan.sample(self.base, self.rng))
+            .map(|_| match &mut self.steering {
+                Some((steer, kept)) => steer.draw(self.rng, kept, |r| plan.sample(base, r)),
+                None => plan.sample(base, self.rng),
+            })
             .collect();
         let refs: Vec<&Look> = looks.iter().collect();
         let labs = lab_proxies(self.proxy, &refs, self.gain);

@@ -13,4 +13,5 @@ pub mod preference;
 pub mod sampler;
 pub mod sheet;
 pub mod stage;
+pub mod steer;
 pub mod targeting;

@@ -6,6 +6,7 @@ use std::path::Path;
 use crate::gallery::{Generation, PROXY_WIDTH, Size};
 use crate::objective::Objective;
 use crate::sampler::{Constraints, LightGroups, Plan, Spread, Target};
+use crate::steer::Steer;
 use crate::targeting::{Footprints, WORKING_WIDTH};
 use visobjd_compositor::basis::{self, BasisImages, Loaded, Precision, Unseen, UnseenPosition};
 use visobjd_compositor::render::{exposure_gain, render_srgb8};
@@ -185,6 +186,10 @@ impl Stage {
             clusters: request.clusters,
         };
         let share = self.drawing_share(size);
+        let mut steer = request.steer.cloned();
+        let kept: Vec<bool> = (0..self.scene.lights.len())
+            .map(|l| constraints.locked[l] || constraints.off[l])
+            .collect();
         let (mut generation, thumbnails) = crate::gallery::generate(
             &plan,
             request.base,
@@ -192,6 +197,7 @@ impl Stage {
             self.gain,
             size,
             rng,
+            steer.as_mut().map(|s| (s, kept.as_slice())),
             |reps| self.thumbnails(reps),
             &mut |done| progress(done * share),
         );
@@ -228,6 +234,8 @@ pub struct GenerateRequest<'a> {
     pub count: usize,
     /// Entries at most (c).
     pub clusters: usize,
+    /// Steering by the designer's ratings; `None`: the generate it always was.
+    pub steer: Option<&'a Steer>,
 }
 
 #[cfg(test)]
@@ -301,6 +309,7 @@ mod tests {
             spread: Spread::default(),
             count,
             clusters: 12,
+            steer: None,
         };
         let mut seen = Vec::new();
         let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(seed);

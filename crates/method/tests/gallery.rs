@@ -87,6 +87,7 @@ fn generate(
             spread: Spread::default(),
             count,
             clusters,
+            steer: None,
         },
         &mut Rng::seed_from_u64(seed),
     )
@@ -147,6 +148,7 @@ fn a_gallery_of_identical_candidates_runs_out_of_draws_and_says_so() {
             spread: Spread::default(),
             count: 10,
             clusters: 12,
+            steer: None,
         },
         &mut Rng::seed_from_u64(5),
     );

@@ -116,6 +116,7 @@ fn an_objective_aimed_at_one_side_aims_the_movers_there() {
                 spread: Spread::default(),
                 count: 60,
                 clusters: 6,
+                steer: None,
             },
             &mut Rng::seed_from_u64(seed),
         )
@@ -212,6 +213,7 @@ fn a_position_without_an_image_is_never_drawn_and_the_rest_are() {
             spread: Spread::default(),
             count: 40,
             clusters: 4,
+            steer: None,
         },
         &mut Rng::seed_from_u64(9),
     );

@@ -166,7 +166,10 @@ fn ratings_by_an_untold_rule_predict_it_on_new_looks() {
         n += 1;
     }
     // Chance is a half.
-    println!("{agree} of {n} new looks predicted as the rule says ({:?})", model.hyper());
+    println!(
+        "{agree} of {n} new looks predicted as the rule says ({:?})",
+        model.hyper()
+    );
     assert!(
         agree * 100 >= n * 75,
         "{agree} of {n} predicted as the rule says"
