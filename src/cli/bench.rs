@@ -140,6 +140,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         )
     });
     rows.push(movers::row(&dir, &objective, reps * 2)?);
+    rows.push(steer::row(&demo, &objective, reps));
     rows.push(Row::at_most(
         format!("scene load, {} lights at {}x{}", BIG.0, BIG.1, BIG.2),
         load_s,
@@ -241,6 +242,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
 mod drag;
 mod movers;
+mod steer;
 
 /// One line of the report.
 struct Row {
