@@ -14,10 +14,10 @@ const W: usize = 120;
 const H: usize = 40;
 
 /// One palette of a test mover: number, name, pan, tilt, and where its spot lands (x).
-type Palette = (u32, &'static str, f64, f64, usize);
+pub(crate) type Palette = (u32, &'static str, f64, f64, usize);
 
 /// The movers: channel, address, and their palettes.
-const MOVERS: [(u32, usize, [Palette; 3]); 2] = [
+pub(crate) const MOVERS: [(u32, usize, [Palette; 3]); 2] = [
     (
         11,
         11,
@@ -40,7 +40,7 @@ const MOVERS: [(u32, usize, [Palette; 3]); 2] = [
 
 /// Two washes (stage left and right halves) and the two movers, each spot lighting a
 /// disc around its palette's centre: written as scene.toml and its images.
-fn mover_stage(dir: &Path) -> PathBuf {
+pub(crate) fn mover_stage(dir: &Path) -> PathBuf {
     let scene = dir.join("mover-scene");
     std::fs::create_dir_all(scene.join("basis")).expect("mkdir");
     let mut toml = String::from(
@@ -115,7 +115,7 @@ fn aim_of(dmx: &[u8], m: usize) -> (u16, u16) {
 }
 
 /// Which palette mover `m`'s pan and tilt in `dmx` are (within one 16-bit step).
-fn palette_on_wire(dmx: &[u8], m: usize) -> Option<u32> {
+pub(crate) fn palette_on_wire(dmx: &[u8], m: usize) -> Option<u32> {
     let got = aim_of(dmx, m);
     MOVERS[m].2.iter().map(|p| p.0).find(|&n| {
         let want = aimed(m, n);
