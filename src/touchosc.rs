@@ -5,7 +5,8 @@
 //! node; every node has `<properties>` (name, frame, colour, ...), `<values>` (`x`, `touch`,
 //! a label's `text`), `<messages>` (`<osc>` with triggers, a path and arguments made of
 //! `<partial>`s) and `<children>`. Five pages: objectives (with the drag-to-explore pad),
-//! gallery, constraints, transfer, looks (docs/touchosc.md).
+//! gallery, constraints, transfer, looks; a sixth, positions, when a group has moving
+//! lights (docs/touchosc.md).
 
 use std::fmt::Write as _;
 use std::io::Write as _;
@@ -21,6 +22,8 @@ pub const MAX_REFERENCES: usize = 12;
 pub const MAX_GROUPS: usize = 8;
 /// Entries a transfer row offers (`/vo/transfer 1` ... `/vo/transfer 8`).
 pub const TRANSFER_ENTRIES: usize = 8;
+/// Palette buttons a group's row on the positions page offers, at most (its first ones).
+pub const MAX_PALETTES: usize = 8;
 
 /// The layout's size: a 4:3 tablet in landscape.
 const WIDTH: i32 = 1024;
@@ -571,6 +574,68 @@ fn transfer_page(groups: &[String]) -> Node {
     page("transfer", "Transfer", c)
 }
 
+/// A group's row on the positions page: the focus palettes all its moving lights have.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PaletteRow {
+    /// The group's name (its address form is written from it).
+    pub group: String,
+    /// Each palette's number and label, by number.
+    pub palettes: Vec<(u32, Option<String>)>,
+}
+
+/// The positions page's rows: every group of `scene` with moving lights that share a
+/// palette (all of them, not only the first [`MAX_GROUPS`]: a rig's movers are often a
+/// group declared last).
+pub fn palette_rows(scene: &visobjd_scene::Scene) -> Vec<PaletteRow> {
+    scene
+        .groups
+        .iter()
+        .filter_map(|g| {
+            let shared = scene.shared_palettes(&g.lights);
+            (!shared.is_empty()).then(|| PaletteRow {
+                group: g.name.clone(),
+                palettes: shared.iter().map(|p| (p.number, p.name.clone())).collect(),
+            })
+        })
+        .collect()
+}
+
+/// The positions page: per group with moving lights (the first [`MAX_GROUPS`]), a button
+/// per palette they share (the first [`MAX_PALETTES`]), captioned with its name, that
+/// sends its movers there (`/vo/group/<name>/position n`).
+fn positions_page(rows: &[PaletteRow]) -> Node {
+    let mut c = vec![label(
+        "positions_title",
+        "Focus palettes (moves the group's moving lights, at once)",
+        [16, 8, 992, 32],
+        18,
+    )];
+    for (i, row) in rows.iter().take(MAX_GROUPS).enumerate() {
+        let y = 48 + i as i32 * 60;
+        c.push(label(
+            &format!("positions_group_{i}"),
+            &row.group,
+            [16, y, 150, 52],
+            16,
+        ));
+        let g = visobjd_scene::address_segment(&row.group);
+        for (j, (n, name)) in row.palettes.iter().take(MAX_PALETTES).enumerate() {
+            c.extend(button(
+                &format!("position_{i}_{n}"),
+                name.as_deref().unwrap_or(&n.to_string()),
+                [170 + j as i32 * 104, y, 96, 52],
+                ENTRY,
+                vec![Message::press(
+                    &format!("/vo/group/{g}/position"),
+                    vec![Partial::constant_int(*n as usize)],
+                )],
+            ));
+        }
+    }
+    c.push(status_line());
+    page("positions", "Positions", c)
+}
+
 /// The looks page: save the live look to a slot, recall a slot.
 fn looks_page() -> Node {
     let mut c = vec![
@@ -623,8 +688,9 @@ fn page(name: &str, tab: &str, children: Vec<Node>) -> Node {
 }
 
 /// The whole layout's XML; `references` are the image names the objectives page offers,
-/// `groups` the scene's groups the constraints and transfer pages offer.
-pub fn layout_xml(references: &[String], groups: &[String]) -> String {
+/// `groups` the scene's groups the constraints and transfer pages offer, `palettes` the
+/// rows of the positions page (none: no such page).
+pub fn layout_xml(references: &[String], groups: &[String], palettes: &[PaletteRow]) -> String {
     let mut pager = Node::new("PAGER", "pages", [0, 0, WIDTH, HEIGHT], BACKGROUND);
     pager.props.extend([
         ('b', "tabbar", "1".into()),
@@ -638,6 +704,9 @@ pub fn layout_xml(references: &[String], groups: &[String]) -> String {
         transfer_page(groups),
         looks_page(),
     ];
+    if !palettes.is_empty() {
+        pager.children.push(positions_page(palettes));
+    }
     let root = Node::group("visobjd", [0, 0, WIDTH, HEIGHT], vec![pager]);
     let mut out = String::from("<?xml version='1.0' encoding='UTF-8'?><lexml version='3'>");
     let mut ids = 0u32;
@@ -647,9 +716,13 @@ pub fn layout_xml(references: &[String], groups: &[String]) -> String {
 }
 
 /// The layout, zlib-compressed as TouchOSC reads it.
-pub fn layout_tosc(references: &[String], groups: &[String]) -> std::io::Result<Vec<u8>> {
+pub fn layout_tosc(
+    references: &[String],
+    groups: &[String],
+    palettes: &[PaletteRow],
+) -> std::io::Result<Vec<u8>> {
     let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::default());
-    z.write_all(layout_xml(references, groups).as_bytes())?;
+    z.write_all(layout_xml(references, groups, palettes).as_bytes())?;
     z.finish()
 }
 
@@ -783,8 +856,12 @@ mod tests {
     fn regenerating_gives_the_same_layout() {
         let refs = vec!["sunset.png".to_string(), "noir.png".to_string()];
         let groups = vec!["front".to_string(), "back".to_string(), "side".to_string()];
-        assert_eq!(layout_xml(&refs, &groups), layout_xml(&refs, &groups));
-        let xml = layout_xml(&refs, &groups);
+        assert_eq!(
+            layout_xml(&refs, &groups, &[]),
+            layout_xml(&refs, &groups, &[])
+        );
+        let xml = layout_xml(&refs, &groups, &[]);
+        assert!(!xml.contains("Positions"), "no movers, no positions page");
         assert!(xml.starts_with("<?xml version='1.0' encoding='UTF-8'?><lexml version='3'><node "));
         assert!(xml.contains("<![CDATA[sunset.png]]>"));
         assert_eq!(
@@ -808,6 +885,25 @@ mod tests {
             xml.contains("<var>touch</var>"),
             "the pad explores on touch"
         );
+    }
+
+    #[test]
+    fn a_group_of_movers_gets_a_button_per_palette_they_share() {
+        let row = |group: &str, n: u32| PaletteRow {
+            group: group.into(),
+            palettes: (1..=n)
+                .map(|p| (p, (p != 2).then(|| format!("fp {p}"))))
+                .collect(),
+        };
+        let xml = layout_xml(&[], &[], &[row("spots L", 3), row("wide", 12)]);
+        assert!(xml.contains("<![CDATA[Positions]]>"));
+        let sends = |path: &str| xml.matches(&format!("<![CDATA[{path}]]>")).count();
+        assert_eq!(sends("/vo/group/spots_L/position"), 3);
+        assert_eq!(sends("/vo/group/wide/position"), MAX_PALETTES);
+        // Captioned with the palette's name, or its number without one.
+        assert!(xml.contains("<![CDATA[fp 3]]>") && xml.contains("<![CDATA[2]]>"));
+        assert!(xml.contains("<![CDATA[position_1_8]]>"));
+        assert!(!xml.contains("<![CDATA[position_1_9]]>"));
     }
 
     #[test]

@@ -11,7 +11,8 @@ pub struct Args {
     /// The references folder whose images get a button on the objectives page.
     #[arg(long, default_value = "scenes/demo/refs")]
     refs: PathBuf,
-    /// The scene folder whose groups get the constraints and transfer rows.
+    /// The scene folder whose groups get the constraints and transfer rows (and, with
+    /// moving lights, the positions page's).
     #[arg(long, default_value = "scenes/demo")]
     scene: PathBuf,
     /// The .tosc file to write.
@@ -26,17 +27,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let scene = visobjd_scene::Scene::load(&args.scene)
         .with_context(|| format!("--scene {}: cannot load it", args.scene.display()))?;
     let groups: Vec<String> = scene.groups.iter().map(|g| g.name.clone()).collect();
-    let bytes =
-        crate::touchosc::layout_tosc(&refs, &groups).context("cannot compress the layout")?;
+    let palettes = crate::touchosc::palette_rows(&scene);
+    let bytes = crate::touchosc::layout_tosc(&refs, &groups, &palettes)
+        .context("cannot compress the layout")?;
     std::fs::write(&args.out, bytes)
         .with_context(|| format!("--out {}: cannot write it", args.out.display()))?;
     let shown = refs.len().min(crate::touchosc::MAX_REFERENCES);
     println!(
-        "touchosc: {} reference buttons, {} groups, {} entries, {} look slots -> {}",
+        "touchosc: {} reference buttons, {} groups, {} entries, {} look slots, {} groups of moving lights -> {}",
         shown,
         groups.len().min(crate::touchosc::MAX_GROUPS),
         crate::touchosc::ENTRY_BUTTONS,
         crate::touchosc::LOOK_SLOTS,
+        palettes.len().min(crate::touchosc::MAX_GROUPS),
         args.out.display()
     );
     left_off(
@@ -51,6 +54,22 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         &groups,
         crate::touchosc::MAX_GROUPS,
     );
+    let moving: Vec<String> = palettes.iter().map(|r| r.group.clone()).collect();
+    left_off(
+        "groups of moving lights",
+        "positions",
+        &moving,
+        crate::touchosc::MAX_GROUPS,
+    );
+    for row in &palettes {
+        let numbers: Vec<String> = row.palettes.iter().map(|p| p.0.to_string()).collect();
+        left_off(
+            &format!("palettes of group `{}`", row.group),
+            "positions",
+            &numbers,
+            crate::touchosc::MAX_PALETTES,
+        );
+    }
     Ok(())
 }
 

@@ -23,6 +23,7 @@ mod live;
 mod looks;
 mod ma3;
 mod objective;
+mod position;
 mod reload;
 mod runner;
 mod status;
@@ -51,6 +52,7 @@ enum Command {
     EosIn(eos_in::Cmd),
     EosOut(eos_out::Cmd),
     Objective(objective::Cmd),
+    Position(position::Cmd),
     Constraint(constraint::Cmd),
     Console(console::Cmd),
     Generate(generate::Cmd),
@@ -110,6 +112,9 @@ impl Command {
         if let Some(c) = ma3::Cmd::parse(req)? {
             return Ok(Command::Ma3(c));
         }
+        if let Some(c) = position::Cmd::parse(req)? {
+            return Ok(Command::Position(c));
+        }
         if let Some(c) = reload::Cmd::parse(req)? {
             return Ok(Command::Reload(c));
         }
@@ -138,6 +143,7 @@ impl Command {
             Command::EosIn(_) => "eos",
             Command::EosOut(_) => "eos export",
             Command::Objective(_) => "objective",
+            Command::Position(_) => "position",
             Command::Constraint(_) => "constraint",
             Command::Console(_) => "console",
             Command::Generate(_) => "generate",
@@ -158,6 +164,7 @@ impl Command {
             Command::EosIn(c) => c.apply(cx),
             Command::EosOut(c) => c.apply(cx),
             Command::Objective(c) => c.apply(cx),
+            Command::Position(c) => c.apply(cx),
             Command::Constraint(c) => c.apply(cx),
             Command::Console(c) => c.apply(cx),
             Command::Generate(c) => c.apply(cx),
@@ -193,9 +200,11 @@ impl Command {
             }
             Command::Live(c) => !matches!(c, live::Cmd::Live),
             Command::Looks(c) => !matches!(c, looks::Cmd::List),
-            // A reload changes this daemon's own files' view, not the mirrored session.
+            // A reload changes this daemon's own files' view, not the mirrored session; a
+            // learned palette is written into this daemon's own scene.toml.
             Command::EosOut(_)
             | Command::Ma3(_)
+            | Command::Position(_)
             | Command::Reload(_)
             | Command::Status(_)
             | Command::TestHook(_) => false,

@@ -2,10 +2,10 @@
 //! daemon reloads its own files, so a backup takes it from any allowed sender and it is
 //! never forwarded.
 
-use rosc::OscMessage;
+use rosc::{OscMessage, OscType};
 
 use super::Context;
-use crate::engine::Refusal;
+use crate::engine::{Refusal, msg};
 use crate::osc::args::Request;
 
 pub enum Cmd {
@@ -21,7 +21,9 @@ impl Cmd {
         match self {
             Cmd::Reload => {
                 // The answer comes once the images are read and the change is made.
-                cx.engine.reload_then(cx.later())?;
+                cx.engine.reload_then(cx.later(), |done| {
+                    vec![msg("/vo/reloaded", vec![OscType::String(done)])]
+                })?;
                 Ok(Vec::new())
             }
         }

@@ -6,9 +6,10 @@ use std::sync::{Arc, Mutex};
 
 use super::session::Change;
 use super::{Engine, Outcome, Refusal};
-use visobjd_dmx::input::SourceInfo;
+use visobjd_dmx::input::{Console, SourceInfo};
 use visobjd_dmx::{Input, Patch};
 use visobjd_scene::look::Look;
+use visobjd_scene::profile::Profile;
 
 /// The input, while it runs (its DMX is read through the running scene's patch).
 pub(super) struct ConsoleInput {
@@ -52,6 +53,37 @@ impl Engine {
     /// sources made it; refused when there is no input or no source counts yet.
     pub fn console_look(&self) -> Result<(Look, usize), Refusal> {
         let patch = Patch::new(&self.stage().scene);
+        let console = self.console_now(&patch)?;
+        Ok((patch.look(&console.dmx), console.sources))
+    }
+
+    /// Where the console's merged output aims each light, in degrees from the centre of
+    /// its profile's pan and tilt ranges: `None` for a light without pan and tilt slots or
+    /// on a universe no console source counts on now (its zeros are not the console's).
+    /// Refused as [`Engine::console_look`] is.
+    pub fn console_aims(&self) -> Result<Vec<Option<[f64; 2]>>, Refusal> {
+        let stage = self.stage();
+        let scene = &stage.scene;
+        let patch = Patch::new(scene);
+        let console = self.console_now(&patch)?;
+        Ok(patch
+            .aims(&console.dmx)
+            .into_iter()
+            .enumerate()
+            .map(|(l, aim)| {
+                let [pan, tilt] = aim.filter(|_| console.received[patch.universe_of(l)])?;
+                let profile = scene.profile(l);
+                Some([
+                    Profile::position_degrees(pan, profile.pan_range),
+                    Profile::position_degrees(tilt, profile.tilt_range),
+                ])
+            })
+            .collect())
+    }
+
+    /// The merged console output of `patch`'s universes now; refused when there is no
+    /// input or no source counts yet.
+    fn console_now(&self, patch: &Patch) -> Result<Console, Refusal> {
         let read = self.console.with_input(|input| {
             let console = input.console(patch.universes());
             if console.sources == 0 {
@@ -62,7 +94,7 @@ impl Engine {
                     visobjd_dmx::input::SAMPLE.as_secs_f32()
                 )));
             }
-            Ok((patch.look(&console.dmx), console.sources))
+            Ok(console)
         });
         read.unwrap_or_else(|| {
             Err(Refusal::conflict(

@@ -20,9 +20,9 @@ use std::time::SystemTime;
 
 use super::persist::{Snapshot, apply_session};
 use super::session::Session;
-use super::{Engine, Later, Refusal, msg};
+use super::{Engine, Later, Refusal};
 use crate::config::Config;
-use rosc::OscType;
+use rosc::OscMessage;
 use visobjd_dmx::Patch;
 use visobjd_method::stage::{Stage, THUMB_WIDTH};
 use visobjd_scene::Scene;
@@ -183,16 +183,17 @@ impl Engine {
     }
 
     /// [`Engine::reload`] on a thread of its own (it reads every image), answered through
-    /// `answer`: `/vo/reloaded <what runs now>`, or why nothing changed.
-    pub fn reload_then(self: &Arc<Self>, answer: Later) -> Result<(), Refusal> {
+    /// `answer`: `reply(what runs now)` (`/vo/reloaded`'s, or that of a command that
+    /// changed the scene's files and is answered once they run), or why nothing changed.
+    pub fn reload_then(
+        self: &Arc<Self>,
+        answer: Later,
+        reply: impl FnOnce(String) -> Vec<OscMessage> + Send + 'static,
+    ) -> Result<(), Refusal> {
         let engine = Arc::clone(self);
         self.threads
             .spawn("reload", move || {
-                answer(
-                    engine
-                        .reload()
-                        .map(|done| vec![msg("/vo/reloaded", vec![OscType::String(done)])]),
-                );
+                answer(engine.reload().map(reply));
             })
             .map_err(|e| Refusal::internal(format!("cannot start the reload: {e}")))
     }

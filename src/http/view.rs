@@ -13,19 +13,21 @@ use crate::engine::Engine;
 use crate::engine::rules::Exclude;
 use crate::engine::session::Session;
 use visobjd_method::constrain::Saturation;
-use visobjd_scene::Scene;
 use visobjd_scene::look::Look;
+use visobjd_scene::{Palette, Scene};
 
 pub(super) async fn state_json(State(sh): State<Arc<Shared>>) -> Response {
     axum::Json(state(&sh.engine)).into_response()
 }
 
-/// A short hash of a look, so the page fetches a picture again only when it changed.
+/// A short hash of a look, so the page fetches a picture again only when it changed (a
+/// mover's position changes the picture as its intensity does).
 pub(super) fn look_key(look: &Look) -> String {
     let mut hasher = std::collections::hash_map::DefaultHasher::new();
     for l in &look.levels {
         l.intensity.to_bits().hash(&mut hasher);
         l.color.map(f32::to_bits).hash(&mut hasher);
+        l.position.hash(&mut hasher);
     }
     format!("{:016x}", hasher.finish())
 }
@@ -71,7 +73,9 @@ fn state(e: &Engine) -> Value {
     })
 }
 
-/// Every light: its live level and colour, lock and constraints.
+/// Every light: its live level and colour, lock and constraints; a moving light also its
+/// focus palettes (in its order) and the one it is in live, so the page offers them and
+/// follows a change made elsewhere.
 fn lights(scene: &Scene, s: &Session) -> Vec<Value> {
     let rules = &s.rules;
     scene
@@ -89,6 +93,14 @@ fn lights(scene: &Scene, s: &Session) -> Vec<Value> {
                 "color": lv.color,
                 "lock": s.locked_lights[i],
             });
+            if let Some(at) = l.position_of(&lv) {
+                let offered: Vec<&Palette> = l
+                    .positions
+                    .iter()
+                    .filter_map(|p| scene.palette(p.palette))
+                    .collect();
+                add_palettes(&mut light, &offered, Some(at.palette));
+            }
             add_rules(
                 &mut light,
                 None,
@@ -100,7 +112,9 @@ fn lights(scene: &Scene, s: &Session) -> Vec<Value> {
         .collect()
 }
 
-/// Every group: its lights, mean live intensity, key, lock and constraints.
+/// Every group: its lights, mean live intensity, key, lock and constraints; with moving
+/// lights also the palettes they all have (`palettes`) and the one they are all in live
+/// (`position`, null when they differ).
 fn groups(scene: &Scene, s: &Session) -> Vec<Value> {
     let rules = &s.rules;
     scene
@@ -118,6 +132,18 @@ fn groups(scene: &Scene, s: &Session) -> Vec<Value> {
                 "lock": s.locked_groups[g],
                 "colour": group.lights.iter().any(|&l| scene.profile(l).has_colour()),
             });
+            let shared = scene.shared_palettes(&group.lights);
+            if !shared.is_empty() {
+                // The palette its movers are all in, if they are in one.
+                let mut at = group
+                    .lights
+                    .iter()
+                    .filter_map(|&l| scene.lights[l].position_of(&s.live.levels[l]))
+                    .map(|p| p.palette);
+                let first = at.next();
+                let one = first.filter(|&n| at.all(|m| m == n));
+                add_palettes(&mut row, &shared, one);
+            }
             let ratio = rules.ratios[g].map(|(a, r)| (scene.groups[a].name.as_str(), r));
             add_rules(
                 &mut row,
@@ -207,6 +233,18 @@ fn console(e: &Engine) -> Option<Vec<Value>> {
 /// f32 (0.2, not 0.20000000298023224), so the page's number fields show it as typed.
 fn decimal(v: f32) -> f64 {
     v.to_string().parse().unwrap_or(f64::from(v))
+}
+
+/// Adds the focus palettes a light or a group offers (`palettes`: `[number, name or
+/// null]`) and the one it is in (`position`) to its row.
+fn add_palettes(row: &mut Value, offered: &[&Palette], at: Option<u32>) {
+    if let Some(row) = row.as_object_mut() {
+        row.insert(
+            "palettes".into(),
+            offered.iter().map(|p| json!([p.number, p.name])).collect(),
+        );
+        row.insert("position".into(), json!(at));
+    }
 }
 
 /// Adds a group's or a light's constraints to its row, each only when set (a scene of

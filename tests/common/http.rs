@@ -5,13 +5,19 @@ use std::io::{Read, Write};
 use std::net::{IpAddr, SocketAddr, TcpStream};
 use std::time::{Duration, Instant};
 
-use super::daemon::{Daemon, PATIENCE, free_port};
+use super::daemon::{Daemon, PATIENCE, Setup, free_port};
 
 /// A daemon with the web gallery on; returns it and the gallery's address.
 pub fn start(name: &str) -> (Daemon, SocketAddr) {
+    start_setup(name, Setup::default())
+}
+
+/// [`start`] from a [`Setup`] (another scene, more config), the page added to its config.
+pub fn start_setup(name: &str, mut setup: Setup) -> (Daemon, SocketAddr) {
     let lo = IpAddr::from([127, 0, 0, 1]);
     let port = free_port(lo, lo);
-    let d = Daemon::start_with(name, &format!("\n[http]\nlisten = \"127.0.0.1:{port}\"\n"));
+    setup.extra += &format!("\n[http]\nlisten = \"127.0.0.1:{port}\"\n");
+    let d = Daemon::start_setup(name, setup);
     let addr = SocketAddr::from(([127, 0, 0, 1], port));
     // OSC answers before the web listener is up: wait for it (bounded).
     let end = Instant::now() + PATIENCE;

@@ -25,19 +25,19 @@ const SOURCE_LOSS: Duration = Duration::from_millis(2500);
 
 /// A console's state, as its sender thread sends it.
 #[derive(Clone)]
-struct Show {
-    priority: u8,
+pub(crate) struct Show {
+    pub(crate) priority: u8,
     /// Levels per universe (512 slots each).
-    levels: BTreeMap<u16, Vec<u8>>,
+    pub(crate) levels: BTreeMap<u16, Vec<u8>>,
     /// Per-address priorities per universe (sent as 0xDD packets), if any.
-    priorities: BTreeMap<u16, Vec<u8>>,
+    pub(crate) priorities: BTreeMap<u16, Vec<u8>>,
     /// Level packets stop (0xDD packets go on).
-    levels_off: bool,
+    pub(crate) levels_off: bool,
 }
 
 /// A console on loopback: sends its show to the daemon's input every 25 ms, as consoles
 /// refresh, until dropped or stopped.
-struct Console {
+pub(crate) struct Console {
     show: Arc<Mutex<Show>>,
     /// Level packets sent so far.
     sent: Arc<AtomicU64>,
@@ -52,7 +52,7 @@ struct Console {
 }
 
 impl Console {
-    fn start(to: SocketAddr, id: u8, name: &'static str, show: Show) -> Console {
+    pub(crate) fn start(to: SocketAddr, id: u8, name: &'static str, show: Show) -> Console {
         Console::start_from(LOCALHOST, to, id, name, show)
     }
 
@@ -111,12 +111,12 @@ impl Console {
         }
     }
 
-    fn change(&self, f: impl FnOnce(&mut Show)) {
+    pub(crate) fn change(&self, f: impl FnOnce(&mut Show)) {
         f(&mut self.show.lock().expect("show"));
     }
 
     /// Waits until `n` more level packets have gone out (each after the last change).
-    fn sent_more(&self, n: u64) {
+    pub(crate) fn sent_more(&self, n: u64) {
         let from = self.sent.load(Ordering::SeqCst);
         let end = Instant::now() + PATIENCE;
         while self.sent.load(Ordering::SeqCst) < from + n {

@@ -1,12 +1,19 @@
 //! Moving lights through the real daemon (docs/osc.md, docs/dmx.md): a mover goes to a
 //! focus palette by hand and from the gallery, its pan and tilt decoded off sACN and
 //! Art-Net as degrees through its profile's range, a fade moves a lit mover with the fade
-//! and a dark one at once.
+//! and a dark one at once; a palette learned from where a console (an E1.31 sender written
+//! from the standard's octets) aims the movers.
 
+use std::collections::BTreeMap;
+use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
-use crate::common::daemon::{Daemon, Osc, PROTOS, Setup, float, int, num, string};
+use crate::common::bin;
+use crate::common::daemon::{
+    Daemon, LOCALHOST, Osc, PATIENCE, PROTOS, Setup, float, free_port, int, num, string, text,
+};
+use crate::daemon_console::{Console, Show};
 use visobjd_testkit::{temp_dir, write_exr};
 
 /// Image size of the mover stage.
@@ -14,10 +21,10 @@ const W: usize = 120;
 const H: usize = 40;
 
 /// One palette of a test mover: number, name, pan, tilt, and where its spot lands (x).
-type Palette = (u32, &'static str, f64, f64, usize);
+pub(crate) type Palette = (u32, &'static str, f64, f64, usize);
 
 /// The movers: channel, address, and their palettes.
-const MOVERS: [(u32, usize, [Palette; 3]); 2] = [
+pub(crate) const MOVERS: [(u32, usize, [Palette; 3]); 2] = [
     (
         11,
         11,
@@ -40,7 +47,7 @@ const MOVERS: [(u32, usize, [Palette; 3]); 2] = [
 
 /// Two washes (stage left and right halves) and the two movers, each spot lighting a
 /// disc around its palette's centre: written as scene.toml and its images.
-fn mover_stage(dir: &Path) -> PathBuf {
+pub(crate) fn mover_stage(dir: &Path) -> PathBuf {
     let scene = dir.join("mover-scene");
     std::fs::create_dir_all(scene.join("basis")).expect("mkdir");
     let mut toml = String::from(
@@ -115,7 +122,7 @@ fn aim_of(dmx: &[u8], m: usize) -> (u16, u16) {
 }
 
 /// Which palette mover `m`'s pan and tilt in `dmx` are (within one 16-bit step).
-fn palette_on_wire(dmx: &[u8], m: usize) -> Option<u32> {
+pub(crate) fn palette_on_wire(dmx: &[u8], m: usize) -> Option<u32> {
     let got = aim_of(dmx, m);
     MOVERS[m].2.iter().map(|p| p.0).find(|&n| {
         let want = aimed(m, n);
@@ -267,4 +274,186 @@ fn a_fade_moves_a_lit_mover_steadily_and_a_dark_one_at_once() {
             }
         }
     }
+}
+
+/// `/vo/positions`: (palette, name, channels) per palette, checked against its end's count.
+fn palettes(d: &mut Daemon) -> Vec<(i32, String, Vec<i32>)> {
+    let mut got = d.call("/vo/positions", vec![], "/vo/positions/end");
+    let end = got.pop().expect("an end");
+    assert_eq!(end.addr, "/vo/positions/end", "{end:?}");
+    let listed: Vec<(i32, String, Vec<i32>)> = got
+        .iter()
+        .map(|m| {
+            assert_eq!(m.addr, "/vo/position", "{m:?}");
+            (
+                num(&m.args[0]) as i32,
+                text(&m.args[1]),
+                m.args[2..].iter().map(|a| num(a) as i32).collect(),
+            )
+        })
+        .collect();
+    assert_eq!(end.args, [int(listed.len() as i32)]);
+    listed
+}
+
+/// Sends `/vo/position/learn` until the console's source counts (it is sampled for 1.5 s
+/// first; until then the learn is refused and changes nothing); returns its reply.
+fn learn(d: &mut Daemon, args: Vec<rosc::OscType>) -> rosc::OscMessage {
+    let end = Instant::now() + 2 * PATIENCE;
+    loop {
+        let mut got = d.call("/vo/position/learn", args.clone(), "/vo/position/learned");
+        let last = got.pop().expect("a reply");
+        if last.addr == "/vo/position/learned" {
+            assert!(got.is_empty(), "{got:?}");
+            return last;
+        }
+        let why = text(&last.args[1]);
+        assert!(
+            why.contains("no console source") && Instant::now() < end,
+            "learn refused: {why}"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+#[test]
+fn a_palette_learned_from_the_console_holds_where_it_aimed_the_movers() {
+    let dir = temp_dir("movers-learn");
+    let scene = mover_stage(&dir);
+    // Mover 12 on universe 2, which the console does not send: it is not learned.
+    let toml = scene.join("scene.toml");
+    let text_was = std::fs::read_to_string(&toml).expect("scene.toml");
+    let on_2 = text_was.replacen(
+        "channel = 12\ngroup = \"movers\"\nprofile = \"spot\"\nuniverse = 1\n",
+        "channel = 12\ngroup = \"movers\"\nprofile = \"spot\"\nuniverse = 2\n",
+        1,
+    );
+    assert_ne!(on_2, text_was, "mover 12 moved to universe 2");
+    std::fs::write(&toml, on_2).expect("write scene.toml");
+    let input = SocketAddr::new(LOCALHOST, free_port(LOCALHOST, LOCALHOST));
+    let mut d = Daemon::start_setup(
+        "movers-learn",
+        Setup {
+            scene_from: Some(scene),
+            extra: format!("\n[input.sacn]\nbind = \"{input}\"\nuniverses = [1, 2]\n"),
+            ..Setup::default()
+        },
+    );
+    let scene_toml = d.dir.join("scene/scene.toml");
+    let before = std::fs::read(&scene_toml).expect("the daemon's scene.toml");
+    let why = d.refused("/vo/position/learn", vec![int(4), string("US left")]);
+    assert!(why.contains("no console source"), "{why}");
+    for (args, says) in [
+        (vec![int(0)], "focus palette must be 1..=9999"),
+        (vec![int(4), string(" ")], "a palette name is not blank"),
+        (vec![int(4), int(2)], "expected a string for palette name"),
+    ] {
+        let why = d.refused("/vo/position/learn", args.clone());
+        assert!(why.contains(says), "{args:?}: {why}");
+    }
+    assert_eq!(
+        std::fs::read(&scene_toml).expect("read"),
+        before,
+        "nothing written"
+    );
+
+    // The console aims mover 11 (dimmer at 11, pan16 at 12-13, tilt16 at 14-15).
+    let (pan, tilt) = (0xa357u16, 0x2e91u16);
+    let mut levels = vec![0u8; 512];
+    levels[10] = 255;
+    levels[11..13].copy_from_slice(&pan.to_be_bytes());
+    levels[13..15].copy_from_slice(&tilt.to_be_bytes());
+    let console = Console::start(
+        input,
+        7,
+        "a console",
+        Show {
+            priority: 100,
+            levels: BTreeMap::from([(1, levels)]),
+            priorities: BTreeMap::new(),
+            levels_off: false,
+        },
+    );
+    console.sent_more(1);
+    let r = learn(&mut d, vec![int(4), string("US left")]);
+    assert_eq!(
+        r.args,
+        [int(4), int(1), string("US left")],
+        "one mover learned"
+    );
+    // Written into scene.toml: pan and tilt within one 16-bit step of what the console
+    // sent, through the profile's ranges (540 and 270 degrees); the image capture shoots.
+    let written = visobjd_scene::Scene::load(&d.dir.join("scene")).expect("the scene loads");
+    let degrees = |v: u16, range: f64| (f64::from(v) / 65535.0 - 0.5) * range;
+    let light = &written.lights[written.light_index(11).expect("light 11")];
+    let p = &light.positions[light.position_index(4).expect("palette 4")];
+    assert!(
+        (p.pan - degrees(pan, 540.0)).abs() <= 540.0 / 65535.0,
+        "pan {}",
+        p.pan
+    );
+    assert!(
+        (p.tilt - degrees(tilt, 270.0)).abs() <= 270.0 / 65535.0,
+        "tilt {}",
+        p.tilt
+    );
+    assert!(p.basis.ends_with("basis/011-fp04.exr"), "{:?}", p.basis);
+    let mover_12 = &written.lights[written.light_index(12).expect("light 12")];
+    assert_eq!(
+        mover_12.position_index(4),
+        None,
+        "12 is on a universe not sent"
+    );
+    // Running now: listed, and a mover sent there carries the console's pan and tilt.
+    assert_eq!(
+        palettes(&mut d),
+        [
+            (1, "SL".into(), vec![11, 12]),
+            (2, "C".into(), vec![11, 12]),
+            (3, "SR".into(), vec![11, 12]),
+            (4, "US left".into(), vec![11]),
+        ]
+    );
+    d.ok("/vo/light/11/position", vec![int(4)], "/vo/light/position");
+    for proto in PROTOS {
+        let dmx = d.wire.wait(proto, 1, "mover 11 at palette 4", |dmx| {
+            let (p, t) = aim_of(dmx, 0);
+            p.abs_diff(pan) <= 1 && t.abs_diff(tilt) <= 1
+        });
+        assert_eq!(
+            dmx[10], 0,
+            "{proto:?}: its level is the session's, not the console's"
+        );
+    }
+    // Its image is not shot yet: `visobjd check` names it (the light's other positions
+    // still work).
+    let check = std::process::Command::new(bin())
+        .args(["check", "--config"])
+        .arg(d.config_path())
+        .output()
+        .expect("visobjd check runs");
+    let said = String::from_utf8_lossy(&check.stderr).to_string()
+        + &String::from_utf8_lossy(&check.stdout);
+    assert!(
+        check.status.success()
+            && said.contains("light 11 palette 4")
+            && said.contains("011-fp04.exr"),
+        "{said}"
+    );
+
+    // Learned again without a name, an existing palette keeps its name and takes the aim.
+    let r = learn(&mut d, vec![int(2)]);
+    assert_eq!(r.args, [int(2), int(1), string("C")]);
+    let listed = palettes(&mut d);
+    assert_eq!(listed[1], (2, "C".into(), vec![11, 12]));
+    let again = visobjd_scene::Scene::load(&d.dir.join("scene")).expect("the scene loads");
+    let light = &again.lights[again.light_index(11).expect("light 11")];
+    let p2 = &light.positions[light.position_index(2).expect("palette 2")];
+    assert_eq!((p2.pan, p2.tilt), (p.pan, p.tilt));
+    let (_, positions) = d.live_aimed();
+    assert_eq!(
+        positions,
+        [(11, 4), (12, 1)],
+        "the live look kept its palettes"
+    );
 }

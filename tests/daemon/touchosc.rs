@@ -1,5 +1,6 @@
 //! The shipped TouchOSC layout against the daemon and the docs, both ways: every address
-//! the layout sends is one the real daemon knows (and takes with the layout's arguments),
+//! the layout sends is one the real daemon knows (and takes with the layout's arguments:
+//! the demo's movers end at the last palette button pressed),
 //! every address it listens to is a documented push, and every address of docs/osc.md is
 //! on the tablet unless docs/touchosc.md says it is not.
 
@@ -112,6 +113,26 @@ fn text(n: roxmltree::Node, tag: &str) -> String {
         .to_string()
 }
 
+/// The caption (its label's text) of button `control` in the layout's XML.
+fn caption(xml: &str, control: &str) -> String {
+    let doc = roxmltree::Document::parse(xml).expect("the layout is well-formed XML");
+    let name = format!("{control}_caption");
+    let node = doc
+        .descendants()
+        .filter(|n| n.has_tag_name("node"))
+        .find(|n| {
+            child(*n, "properties").is_some_and(|ps| {
+                ps.children()
+                    .any(|p| text(p, "key") == "name" && text(p, "value") == name)
+            })
+        })
+        .unwrap_or_else(|| panic!("no caption of {control}"));
+    child(node, "values")
+        .and_then(|vs| vs.children().find(|v| text(*v, "key") == "text"))
+        .map(|v| text(v, "default"))
+        .unwrap_or_else(|| panic!("{control}'s caption has no text"))
+}
+
 /// The shipped layout.
 fn shipped() -> Vec<u8> {
     std::fs::read(Path::new(env!("CARGO_MANIFEST_DIR")).join("touchosc/visobjd.tosc"))
@@ -213,7 +234,14 @@ fn the_shipped_layout_is_what_the_generator_writes() {
 #[test]
 fn the_layout_has_its_pages_and_their_controls() {
     let (xml, msgs) = messages(&shipped());
-    for page in ["Objectives", "Gallery", "Constraints", "Transfer", "Looks"] {
+    for page in [
+        "Objectives",
+        "Gallery",
+        "Constraints",
+        "Transfer",
+        "Looks",
+        "Positions",
+    ] {
         assert!(xml.contains(&format!("<![CDATA[{page}]]>")), "page {page}");
     }
     let sends = |path: &str| {
@@ -305,6 +333,20 @@ fn the_layout_has_its_pages_and_their_controls() {
     }
     assert_eq!(sends("/vo/look/save").len(), 16);
     assert_eq!(sends("/vo/look/recall").len(), 16);
+    // The demo's movers (its last group, past the constraints page's room): a button per
+    // palette they share, in number order, captioned with its name.
+    let movers: Vec<(String, Vec<OscType>)> = sends("/vo/group/movers/position")
+        .iter()
+        .map(|m| (caption(&xml, &m.control), m.args.clone()))
+        .collect();
+    let want: Vec<(String, Vec<OscType>)> = demo
+        .palettes
+        .iter()
+        .map(|p| (p.name.clone().expect("named"), vec![int(p.number as i32)]))
+        .collect();
+    assert_eq!(want.len(), 5, "the demo's five palettes");
+    assert_eq!(movers, want);
+    assert_eq!(want[0].0, "DS left");
     for path in [
         "/vo/generate",
         "/vo/next",
@@ -390,6 +432,13 @@ fn every_layout_address_is_one_the_daemon_takes() {
         }
     }
     assert!(failed.is_empty(), "refused:\n{}", failed.join("\n"));
+    // The last palette button pressed (the positions page's, palette 5) moved every mover.
+    let (_, positions) = d.live_aimed();
+    assert_eq!(
+        positions,
+        (45..=50).map(|ch| (ch, 5)).collect::<Vec<_>>(),
+        "the movers at the last palette pressed"
+    );
     // The buttons did what they say: entries exist, looks were saved.
     d.ok("/vo/unsubscribe", vec![], "/vo/unsubscribed");
     assert_eq!(d.looks().len(), 16);

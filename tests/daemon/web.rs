@@ -5,7 +5,8 @@
 //! step checked on the page, in a screenshot, and on the wire; and the constraints of
 //! groups and lights, a pin and a transfer region drawn on the stage, and a history tap
 //! of several steps as one command, read back from the daemon and checked on the wire,
-//! the page shown at a laptop's and a tablet's width.
+//! the page shown at a laptop's and a tablet's width; a mover's focus palette chosen on
+//! the page (pan and tilt on the wire) and one set over OSC followed by the page.
 
 use std::net::{IpAddr, SocketAddr, TcpStream};
 use std::path::{Path, PathBuf};
@@ -1493,4 +1494,93 @@ fn a_tablet_session_by_touch() {
         page.eval("document.getElementById('error').textContent"),
         ""
     );
+}
+
+/// Each select of a focus palette in the groups' and lights' tables, in page order: the
+/// table, the row's name, its options' text and the one chosen.
+const POSITIONS: &str = r#"JSON.stringify([...document.querySelectorAll('#groups tr, #lights tr')].filter(r => r.querySelector('select.position')).map(r => { const s = r.querySelector('select.position'); return [r.closest('table').id, r.dataset.name, [...s.options].map(o => o.textContent), s.value]; }))"#;
+
+/// The palette each select of [`POSITIONS`] shows (group `movers`, then lights 11 and 12;
+/// `""` for a group whose movers differ).
+fn chosen_palettes() -> String {
+    format!("JSON.stringify(JSON.parse({POSITIONS}).map(r => r[3]))")
+}
+
+#[test]
+fn a_movers_palette_from_the_page_and_from_elsewhere() {
+    use crate::daemon_movers::{mover_stage, palette_on_wire};
+    let Some(browser) = chromium() else {
+        return tools::missing("Chromium", "is not installed", "apt-get install chromium");
+    };
+    let stage = mover_stage(&temp_dir("web-movers-stage"));
+    let (mut d, addr) = common::http::start_setup(
+        "web-movers",
+        common::daemon::Setup {
+            scene_from: Some(stage),
+            ..common::daemon::Setup::default()
+        },
+    );
+    let (_browser, mut page) = open(&browser, &format!("http://{addr}/"), "movers");
+    // Each mover lists its palettes by number and name, in its first; the group its movers
+    // share; the washes none.
+    let listed = page.wait(POSITIONS, "listed the movers' palettes", |v| {
+        v.as_str().is_some_and(|s| s.contains("SR"))
+    });
+    assert_eq!(
+        listed,
+        r#"[["groups","movers",["1 SL","2 C","3 SR"],"1"],["lights","11",["1 SL","2 C","3 SR"],"1"],["lights","12",["1 SL","2 C","3 SR"],"1"]]"#
+    );
+    assert_eq!(page.eval(RECORDER), true);
+
+    // Chosen on the page: the same command OSC takes, on the wire and in /vo/live.
+    change(&mut page, "#lights tr[data-name='11'] select.position", "3");
+    assert_eq!(
+        sent(&mut page),
+        serde_json::json!([{
+            "address": "/vo/light/11/position",
+            "args": [3],
+            "answer": { "replies": [{ "address": "/vo/light/position", "args": [11, 3] }] },
+        }])
+    );
+    d.wire.wait_both(1, "mover 11 at SR, 12 at SL", |dmx| {
+        palette_on_wire(dmx, 0) == Some(3) && palette_on_wire(dmx, 1) == Some(1)
+    });
+    assert_eq!(d.live_aimed().1, [(11, 3), (12, 1)]);
+    // The group's movers are in different palettes now.
+    page.wait(&chosen_palettes(), "showed the group mixed", |v| {
+        v == r#"["","3","1"]"#
+    });
+
+    // Set over OSC, the page follows.
+    d.ok(
+        "/vo/group/movers/position",
+        vec![int(2)],
+        "/vo/group/position",
+    );
+    page.wait(&chosen_palettes(), "followed the group set over OSC", |v| {
+        v == r#"["2","2","2"]"#
+    });
+
+    // The group's select from the page moves both movers.
+    change(
+        &mut page,
+        "#groups tr[data-name='movers'] select.position",
+        "1",
+    );
+    assert_eq!(
+        sent(&mut page),
+        serde_json::json!([{
+            "address": "/vo/group/movers/position",
+            "args": [1],
+            "answer": { "replies": [{ "address": "/vo/group/position", "args": ["movers", 1, 2] }] },
+        }])
+    );
+    d.wire.wait_both(1, "both movers at SL", |dmx| {
+        palette_on_wire(dmx, 0) == Some(1) && palette_on_wire(dmx, 1) == Some(1)
+    });
+    assert_eq!(d.live_aimed().1, [(11, 1), (12, 1)]);
+    page.wait(&chosen_palettes(), "showed both movers at 1", |v| {
+        v == r#"["1","1","1"]"#
+    });
+    page.screenshot("movers");
 }

@@ -400,7 +400,7 @@ impl Patch {
             .iter()
             .enumerate()
             .map(|(i, light)| {
-                let (dimmer, colour, _) = read(light, bytes);
+                let (dimmer, colour) = read(light, bytes);
                 let model = real
                     .get(i)
                     .and_then(Option::as_ref)
@@ -431,7 +431,7 @@ impl Patch {
             .lights
             .iter()
             .map(|light| {
-                let (dimmer, colour, aim) = read(light, bytes);
+                let (dimmer, colour) = read(light, bytes);
                 let (brightness, linear) = match colour {
                     Read::Emitters(levels) => {
                         let (t, c) = light.colour.read(&levels);
@@ -451,12 +451,14 @@ impl Patch {
                     None => (brightness, linear),
                 };
                 // A mover is read as the palette nearest its pan and tilt.
-                let position = light
-                    .positions
-                    .iter()
-                    .map(|&(n, p)| (n, (p[0] - aim[0]).powi(2) + (p[1] - aim[1]).powi(2)))
-                    .min_by(|a, b| a.1.total_cmp(&b.1))
-                    .map(|(n, _)| n);
+                let position = aim(light, bytes).and_then(|[pan, tilt]| {
+                    light
+                        .positions
+                        .iter()
+                        .map(|&(n, p)| (n, (p[0] - pan).powi(2) + (p[1] - tilt).powi(2)))
+                        .min_by(|a, b| a.1.total_cmp(&b.1))
+                        .map(|(n, _)| n)
+                });
                 Level {
                     intensity: unit(intensity),
                     color: linear.map(|v| unit(linear_to_srgb(unit(v)))),
@@ -468,6 +470,21 @@ impl Patch {
     }
 }
 
+impl Patch {
+    /// Per light (scene order), the pan and tilt levels (0..1, at DMX precision) the DMX
+    /// in `bytes` (one buffer per universe, in [`Patch::universes`] order) sets, or `None`
+    /// for a light without both: where a console aims its movers, for learning their
+    /// positions (the inverse of the aim [`Patch::levels`] writes).
+    pub fn aims(&self, bytes: &[[u8; SLOTS]]) -> Vec<Option<[f32; 2]>> {
+        self.lights.iter().map(|light| aim(light, bytes)).collect()
+    }
+
+    /// The index in [`Patch::universes`] of light `light`'s universe.
+    pub fn universe_of(&self, light: usize) -> usize {
+        self.lights[light].universe
+    }
+}
+
 /// A light's colour slots read back.
 enum Read {
     /// Its additive emitters' levels, in slot order.
@@ -476,41 +493,62 @@ enum Read {
     Linear([f32; 3]),
 }
 
-/// One light's DMX read back: its dimmer level if it has one, its colour slots, and its
-/// pan and tilt levels (0.5, centre, for an axis it lacks). A missing universe reads as
-/// zeros.
-fn read(light: &Placed, bytes: &[[u8; SLOTS]]) -> (Option<f32>, Read, [f32; 2]) {
+/// Each of a light's slots with its level (0..1) in `bytes`: `byte / 255`, or
+/// `value / 65535` for a 16-bit pair. A missing universe reads as zeros.
+fn read_slots<'a>(
+    light: &'a Placed,
+    bytes: &'a [[u8; SLOTS]],
+) -> impl Iterator<Item = (Slot, f32)> + 'a {
     let dmx = bytes.get(light.universe);
-    let byte = |i: usize| dmx.and_then(|d| d.get(i)).copied().map_or(0.0, f32::from);
-    let mut dimmer = None;
-    let mut emitters = Vec::with_capacity(light.colour.emitters());
-    let mut flags = None::<[f32; 3]>;
-    let mut aim = [0.5f32; 2];
+    let byte = move |i: usize| dmx.and_then(|d| d.get(i)).copied().map_or(0.0, f32::from);
     let mut at = light.offset;
-    for &slot in &light.slots {
+    light.slots.iter().map(move |&slot| {
         let v = if slot.is_wide() {
             (byte(at) * 256.0 + byte(at + 1)) / 65535.0
         } else {
             byte(at) / 255.0
         };
+        at += slot.width();
+        (slot, v)
+    })
+}
+
+/// A light's pan and tilt levels in `bytes` (its first slot of each), or `None` without
+/// both.
+fn aim(light: &Placed, bytes: &[[u8; SLOTS]]) -> Option<[f32; 2]> {
+    let (mut pan, mut tilt) = (None, None);
+    for (slot, v) in read_slots(light, bytes) {
+        match slot {
+            Slot::Pan | Slot::Pan16 => pan = pan.or(Some(v)),
+            Slot::Tilt | Slot::Tilt16 => tilt = tilt.or(Some(v)),
+            _ => {}
+        }
+    }
+    Some([pan?, tilt?])
+}
+
+/// One light's DMX read back: its dimmer level if it has one, and its colour slots. A
+/// missing universe reads as zeros.
+fn read(light: &Placed, bytes: &[[u8; SLOTS]]) -> (Option<f32>, Read) {
+    let mut dimmer = None;
+    let mut emitters = Vec::with_capacity(light.colour.emitters());
+    let mut flags = None::<[f32; 3]>;
+    for (slot, v) in read_slots(light, bytes) {
         match slot {
             s if s.is_emitter() => emitters.push(f64::from(v)),
             Slot::Cyan => flags.get_or_insert([1.0; 3])[0] = 1.0 - v,
             Slot::Magenta => flags.get_or_insert([1.0; 3])[1] = 1.0 - v,
             Slot::Yellow => flags.get_or_insert([1.0; 3])[2] = 1.0 - v,
             Slot::Intensity | Slot::Intensity16 => dimmer = Some(v),
-            Slot::Pan | Slot::Pan16 => aim[0] = v,
-            Slot::Tilt | Slot::Tilt16 => aim[1] = v,
             _ => {}
         }
-        at += slot.width();
     }
     let colour = if emitters.is_empty() {
         Read::Linear(flags.unwrap_or([1.0; 3]))
     } else {
         Read::Emitters(emitters)
     };
-    (dimmer.filter(|_| light.has_intensity), colour, aim)
+    (dimmer.filter(|_| light.has_intensity), colour)
 }
 
 #[cfg(test)]
@@ -970,7 +1008,25 @@ mod tests {
         assert_eq!(dim[13..15], first[13..15]);
         // A fixed light with pan and tilt slots stays at centre.
         assert_eq!(first[21..25], [128, 0, 128, 0]);
-        // Read back, the wire is in the palettes it was sent to, or the nearest.
+        // Read back, the aim is the position's, to DMX precision (16- and 8-bit).
+        let aims = patch.aims(std::slice::from_ref(&b));
+        let spot = aims[0].expect("the spot has pan and tilt");
+        assert!(
+            (spot[0] - (0.5 + 90.0 / 540.0)).abs() <= 0.5 / 65535.0,
+            "{spot:?}"
+        );
+        assert!(
+            (spot[1] - (0.5 - 45.0 / 270.0)).abs() <= 0.5 / 65535.0,
+            "{spot:?}"
+        );
+        assert_eq!(aims[1], Some([191.0 / 255.0, 64.0 / 255.0]));
+        assert_eq!(aims[2], Some([32768.0 / 65535.0, 32768.0 / 65535.0]));
+        assert_eq!(
+            patch.aims(&[])[0],
+            Some([0.0, 0.0]),
+            "a missing universe is zeros"
+        );
+        // Read back as a look, the wire is in the palettes it was sent to, or the nearest.
         let back = patch.look(&[b]);
         assert_eq!(
             [back.levels[0].position, back.levels[1].position],

@@ -619,6 +619,25 @@ impl Scene {
             .map(|i| &self.palettes[i])
     }
 
+    /// The focus palettes every moving light among `lights` has, by number (none when no
+    /// light there moves): what one control for all of them can offer (a group's palette
+    /// buttons on a tablet or the page), since `/vo/group/<name>/position n` moves only the
+    /// lights that have palette n.
+    pub fn shared_palettes(&self, lights: &[usize]) -> Vec<&Palette> {
+        let movers: Vec<usize> = lights
+            .iter()
+            .copied()
+            .filter(|&l| self.lights[l].is_moving())
+            .collect();
+        if movers.is_empty() {
+            return Vec::new();
+        }
+        self.palettes
+            .iter()
+            .filter(|p| movers.iter().all(|l| p.lights.binary_search(l).is_ok()))
+            .collect()
+    }
+
     /// The light with console channel `channel`.
     pub fn light_index(&self, channel: u32) -> Option<usize> {
         self.lights
@@ -1072,6 +1091,17 @@ mod tests {
         assert_eq!(l.position_of(&level(None)).map(|p| p.palette), Some(3));
         assert_eq!(l.position_of(&level(Some(7))).map(|p| p.palette), Some(3));
         assert_eq!(scene.lights[2].position_of(&level(Some(1))), None);
+        // What one control for several lights offers: the palettes all their movers have.
+        let shared = |lights: &[usize]| -> Vec<u32> {
+            scene
+                .shared_palettes(lights)
+                .iter()
+                .map(|p| p.number)
+                .collect()
+        };
+        assert_eq!(shared(&[0, 1, 2]), [3]);
+        assert_eq!(shared(&[0, 2]), [1, 3]);
+        assert!(shared(&[2]).is_empty(), "a fixed light alone offers none");
         // Written back, it reads the same.
         let file = SceneFile::parse(Path::new("/s/scene.toml"), &text).expect("file");
         let again = Scene::parse(Path::new("/s"), &file.to_toml().expect("toml")).expect("again");

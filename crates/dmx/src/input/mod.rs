@@ -40,6 +40,9 @@ pub struct Console {
     pub dmx: Vec<[u8; SLOTS]>,
     /// Sources that count in the merge of those universes now.
     pub sources: usize,
+    /// Per universe asked for, whether a source counts on it now: a zero there is the
+    /// console's only when it does (learning positions reads only those).
+    pub received: Vec<bool>,
 }
 
 /// The input's socket, bound and joined, not yet read ([`Input::open`]).
@@ -142,16 +145,23 @@ impl Input {
     pub fn console(&self, universes: &[u16]) -> Console {
         let now = Instant::now();
         let m = self.merger();
-        let dmx = universes
-            .iter()
-            .map(|&u| m.merged(u, now).unwrap_or([0; SLOTS]))
+        let merged: Vec<Option<[u8; SLOTS]>> =
+            universes.iter().map(|&u| m.merged(u, now)).collect();
+        let received = merged.iter().map(Option::is_some).collect();
+        let dmx = merged
+            .into_iter()
+            .map(|d| d.unwrap_or([0; SLOTS]))
             .collect();
         let sources = m
             .sources(now)
             .iter()
             .filter(|s| s.active && s.universes.iter().any(|u| universes.contains(u)))
             .count();
-        Console { dmx, sources }
+        Console {
+            dmx,
+            sources,
+            received,
+        }
     }
 
     /// The sources seen now (sampled or counting; lost ones are gone).
