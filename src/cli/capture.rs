@@ -145,6 +145,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let options = CaptureOptions {
         lights,
         settle: Duration::from_secs_f64(settle),
+        move_settle: Duration::from_secs_f64(config.capture.move_settle_s),
         width: args.width.max(1),
         format,
         seed: args.seed,
@@ -170,12 +171,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         summary.resumed.len(),
         summary.no_light.len()
     );
+    if !summary.positions_captured.is_empty() || !summary.positions_resumed.is_empty() {
+        println!(
+            "moving lights: {} positions written, {} already done",
+            summary.positions_captured.len(),
+            summary.positions_resumed.len()
+        );
+    }
     if let Some(d) = summary.ambient_drift {
         println!("ambient drift between start and end: {:.1}%", d * 100.0);
     }
     if let Some(o) = summary.overhead_per_light {
         println!(
-            "capture's own time per light (camera and settling aside): {:.2} s",
+            "capture's own time per image (camera and settling aside): {:.2} s",
             o
         );
     }
@@ -201,11 +209,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         for (_, why) in &summary.no_light {
             eprintln!("{why}");
         }
-        let list: Vec<String> = summary
-            .no_light
-            .iter()
-            .map(|(ch, _)| ch.to_string())
-            .collect();
+        // A moving light is named once, however many of its positions show no light.
+        let channels: std::collections::BTreeSet<u32> =
+            summary.no_light.iter().map(|(ch, _)| *ch).collect();
+        let list: Vec<String> = channels.iter().map(u32::to_string).collect();
         anyhow::bail!("lights {} show no light", list.join(", "));
     }
     Ok(())

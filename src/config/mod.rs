@@ -144,6 +144,9 @@ pub struct CaptureConfig {
     pub camera_timeout_s: f64,
     /// How long a light is given to reach its level before the first frame.
     pub settle_s: f64,
+    /// How long a moving light is given, dark, to reach a new position before it is lit
+    /// and shot: a frame taken while it still moves shows it somewhere else.
+    pub move_settle_s: f64,
 }
 
 impl Default for CaptureConfig {
@@ -152,6 +155,7 @@ impl Default for CaptureConfig {
             priority: 200,
             camera_timeout_s: 60.0,
             settle_s: 1.0,
+            move_settle_s: 2.0,
         }
     }
 }
@@ -316,6 +320,11 @@ impl Config {
             (
                 file.capture.settle_s.is_finite() && (0.0..=60.0).contains(&file.capture.settle_s),
                 "capture.settle_s must be 0..=60",
+            ),
+            (
+                file.capture.move_settle_s.is_finite()
+                    && (0.0..=60.0).contains(&file.capture.move_settle_s),
+                "capture.move_settle_s must be 0..=60",
             ),
         ];
         if let Some((_, m)) = checks.iter().find(|(ok, _)| !ok) {

@@ -27,11 +27,31 @@ use visobjd_testkit::{TestLight, temp_dir, tools};
 const ZOOM: usize = 4;
 
 /// A light of the fake's rig: where it is patched (universe, address), its DMX footprint
-/// and intensity slot, and its true image.
+/// and intensity slot, and its true image (a moving light's: one per position, `mover`).
 pub struct RigLight<'a> {
     pub light: &'a TestLight,
     pub footprint: usize,
     pub intensity: Option<usize>,
+    pub mover: Option<&'a RigMover>,
+}
+
+/// A moving light of the fake's rig: the footprint offsets of its 16-bit pan and tilt,
+/// their full travel in degrees, and its positions.
+pub struct RigMover {
+    pub pan: usize,
+    pub tilt: usize,
+    pub pan_range: f64,
+    pub tilt_range: f64,
+    pub positions: Vec<RigPosition>,
+}
+
+/// One position of a [`RigMover`]: its focus palette, pan and tilt in degrees from the
+/// centre of the travel, and the stage it lights there alone at full.
+pub struct RigPosition {
+    pub palette: u32,
+    pub pan: f64,
+    pub tilt: f64,
+    pub pixel: Box<dyn Fn(usize, usize) -> [f32; 3] + Sync>,
 }
 
 /// The fake gphoto2 set up for the test in `dir`: a `bin/gphoto2` link to it, its rig
@@ -55,6 +75,7 @@ impl Fake {
                 light,
                 footprint: l.footprint,
                 intensity: l.intensity,
+                mover: None,
             })
             .collect();
         Fake::on_rig(dir, (W, H), &rig, &[])
@@ -84,14 +105,33 @@ impl Fake {
         std::fs::create_dir_all(&rig_dir).expect("mkdir rig");
         let mut entries = Vec::new();
         for l in rig {
-            let name = format!("{:03}.npy", l.light.channel);
-            write_npy(&rig_dir.join(&name), size.0, size.1, |x, y| {
-                (l.light.pixel)(x, y)
-            });
+            let ch = l.light.channel;
             let mut entry = serde_json::json!({
                 "universe": l.light.universe, "address": l.light.address,
-                "footprint": l.footprint, "basis": name,
+                "footprint": l.footprint,
             });
+            if let Some(m) = l.mover {
+                let positions: Vec<serde_json::Value> = m
+                    .positions
+                    .iter()
+                    .map(|p| {
+                        let name = format!("{ch:03}-{}.npy", p.palette);
+                        write_npy(&rig_dir.join(&name), size.0, size.1, |x, y| (p.pixel)(x, y));
+                        serde_json::json!({"pan": p.pan, "tilt": p.tilt, "basis": name})
+                    })
+                    .collect();
+                entry["pan"] = m.pan.into();
+                entry["tilt"] = m.tilt.into();
+                entry["pan_range"] = m.pan_range.into();
+                entry["tilt_range"] = m.tilt_range.into();
+                entry["positions"] = positions.into();
+            } else {
+                let name = format!("{ch:03}.npy");
+                write_npy(&rig_dir.join(&name), size.0, size.1, |x, y| {
+                    (l.light.pixel)(x, y)
+                });
+                entry["basis"] = name.into();
+            }
             if let Some(i) = l.intensity {
                 entry["intensity"] = i.into();
             }
@@ -145,19 +185,27 @@ impl Fake {
     }
 
     /// Universe 1's DMX of every frame the fake rendered, in order.
-    fn frames(&self) -> Vec<Vec<u8>> {
-        std::fs::read_to_string(self.dir.join("dmx.log"))
-            .unwrap_or_default()
-            .lines()
-            .map(|line| {
-                let entry: serde_json::Value = serde_json::from_str(line).expect("a JSON line");
+    pub fn frames(&self) -> Vec<Vec<u8>> {
+        self.log()
+            .iter()
+            .map(|entry| {
                 let hex = entry["universes"]["1"]
                     .as_str()
-                    .unwrap_or_else(|| panic!("a frame rendered without universe 1: {line}"));
+                    .unwrap_or_else(|| panic!("a frame rendered without universe 1: {entry}"));
                 (0..512)
                     .map(|i| u8::from_str_radix(&hex[2 * i..2 * i + 2], 16).expect("hex"))
                     .collect()
             })
+            .collect()
+    }
+
+    /// Every frame the fake rendered, in order, as its DMX log has it (capture number,
+    /// universes, levels, the position each moving light was rendered at).
+    pub fn log(&self) -> Vec<serde_json::Value> {
+        std::fs::read_to_string(self.dir.join("dmx.log"))
+            .unwrap_or_default()
+            .lines()
+            .map(|line| serde_json::from_str(line).expect("a JSON line"))
             .collect()
     }
 }

@@ -8,4 +8,5 @@ mod common;
 
 mod capture;
 mod capture_gphoto2;
+mod movers;
 mod unseen_camera;

@@ -77,6 +77,7 @@ impl Unseen {
                 light,
                 footprint: 1,
                 intensity: None,
+                mover: None,
             })
             .collect();
         let fake = Fake::on_rig(

@@ -83,7 +83,7 @@ impl StageLight {
 }
 
 /// A soft pool of light centred at (cx, cy), tinted.
-fn pool(cx: f32, cy: f32, level: f32, tint: [f32; 3]) -> impl Fn(usize, usize) -> [f32; 3] {
+pub fn pool(cx: f32, cy: f32, level: f32, tint: [f32; 3]) -> impl Fn(usize, usize) -> [f32; 3] {
     move |x, y| {
         let d2 = ((x as f32 - cx) / 18.0).powi(2) + ((y as f32 - cy) / 12.0).powi(2);
         let v = level * (-d2).exp() + 0.02 * level;
@@ -183,6 +183,52 @@ pub fn listen(socket: UdpSocket, done: Arc<AtomicBool>) -> std::thread::JoinHand
     })
 }
 
+/// Every DMX state of universe 1 that reaches `socket` until `done` is set, each with the
+/// Unix time it was first seen; meanwhile `path` holds the last 64 of them as the fake
+/// gphoto2's `FAKE_GPHOTO2_MOTION` (`{"1": [[seconds, hex], ...]}`, written atomically at
+/// each change), from which it tells a moving light still on its way.
+pub fn track(
+    socket: UdpSocket,
+    done: Arc<AtomicBool>,
+    path: PathBuf,
+) -> std::thread::JoinHandle<Vec<(f64, Vec<u8>)>> {
+    socket
+        .set_read_timeout(Some(Duration::from_millis(20)))
+        .expect("timeout");
+    std::thread::spawn(move || {
+        let mut states: Vec<(f64, Vec<u8>)> = Vec::new();
+        let mut buf = [0u8; 1200];
+        while !done.load(Ordering::SeqCst) {
+            let Ok(n) = socket.recv(&mut buf) else {
+                continue;
+            };
+            let Some(p) = parse_sacn(&buf[..n]) else {
+                continue;
+            };
+            if p.terminated || p.universe != 1 || states.last().is_some_and(|s| s.1 == p.dmx) {
+                continue;
+            }
+            let now = std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .expect("after 1970")
+                .as_secs_f64();
+            states.push((now, p.dmx));
+            let recent: Vec<serde_json::Value> = states[states.len().saturating_sub(64)..]
+                .iter()
+                .map(|(t, dmx)| {
+                    let hex: String = dmx.iter().map(|b| format!("{b:02x}")).collect();
+                    serde_json::json!([t, hex])
+                })
+                .collect();
+            let tmp = path.with_extension("tmp");
+            std::fs::write(&tmp, serde_json::json!({ "1": recent }).to_string())
+                .expect("write the motion file");
+            std::fs::rename(&tmp, &path).expect("replace the motion file");
+        }
+        states
+    })
+}
+
 /// The channels lit in universe 1's `dmx` (512 slots), and how many are at full.
 pub fn lit(dmx: &[u8]) -> (Vec<u32>, usize) {
     let lit = LIGHTS
@@ -225,16 +271,24 @@ pub fn errors_of(
     channels: impl IntoIterator<Item = u32>,
     up_to_scale: bool,
 ) -> Vec<f64> {
+    let names: Vec<String> = channels.into_iter().map(|ch| format!("{ch:03}")).collect();
+    image_errors(dir, &names, up_to_scale)
+}
+
+/// [`errors_of`] for the images `names` (`dir/scene/basis/NAME.exr` against
+/// `dir/truth/NAME.exr`): a moving light's positions are `NNN-PALETTE`.
+pub fn image_errors(dir: &Path, names: &[String], up_to_scale: bool) -> Vec<f64> {
     let lum = |p: &[f32; 3]| 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2];
-    let pairs: Vec<Vec<([f32; 3], [f32; 3])>> = channels
-        .into_iter()
-        .map(|ch| {
-            let got = read_exr(&dir.join(format!("scene/basis/{ch:03}.exr"))).expect("captured");
-            let want = read_exr(&dir.join(format!("truth/{ch:03}.exr"))).expect("truth");
+    let pairs: Vec<Vec<([f32; 3], [f32; 3])>> = names
+        .iter()
+        .map(|name| {
+            let got = read_exr(&dir.join(format!("scene/basis/{name}.exr")))
+                .unwrap_or_else(|e| panic!("{name} captured: {e}"));
+            let want = read_exr(&dir.join(format!("truth/{name}.exr"))).expect("truth");
             assert_eq!(
                 (got.width, got.height),
                 (want.width, want.height),
-                "light {ch}: size"
+                "{name}: size"
             );
             let peak = want.pixels.iter().map(lum).fold(0.0f32, f32::max);
             got.pixels

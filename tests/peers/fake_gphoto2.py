@@ -33,7 +33,19 @@ Environment:
                          "basis", optional "intensity"} with basis a .npy float32 HxWx3
                          linear image (a relative path is taken from the JSON file's
                          folder) and intensity the offset of an intensity slot in the
-                         footprint (an irgb fixture: 0)
+                         footprint (an irgb fixture: 0); a moving light adds "pan" and
+                         "tilt" (offsets of its 16-bit pan and tilt, coarse byte first),
+                         "pan_range" and "tilt_range" (degrees of full travel, DMX centre
+                         0 degrees) and "positions", a list of {"pan", "tilt", "basis"}:
+                         it is rendered with the basis of the position whose pan and tilt
+                         the wire's 16-bit values match within one step (65535ths of the
+                         range), and black when none does
+  FAKE_GPHOTO2_MOTION    with FAKE_GPHOTO2_MOVE_S: a JSON file a test's listener keeps of
+                         the DMX on the wire, {"UNIVERSE": [[unix seconds, hex of 512
+                         slots], ...]}, each state with the time it was first seen, oldest
+                         first: a moving light whose pan and tilt last changed less than
+                         FAKE_GPHOTO2_MOVE_S seconds ago is still on its way and is
+                         rendered where it was before (rig_aims)
   FAKE_GPHOTO2_ZOOM      N: every rig pixel becomes NxN sensor pixels (default 1)
   FAKE_GPHOTO2_SEED      seed of the rig render's noise (default 1; each capture adds its
                          number), shot noise of 20,000 electrons at full scale
@@ -446,34 +458,113 @@ def load_rig(path):
         rig = json.load(f)
     base = os.path.dirname(os.path.abspath(path))
     for light in rig:
-        light["basis"] = os.path.join(base, light["basis"])
+        for entry in [light] + light.get("positions", []):
+            if "basis" in entry:
+                entry["basis"] = os.path.join(base, entry["basis"])
     return rig
+
+
+def position_slots(light):
+    """The footprint offsets of a moving light's 16-bit pan and tilt (coarse and fine of
+    each); none for a fixed light."""
+    if "positions" not in light:
+        return set()
+    return {light["pan"], light["pan"] + 1, light["tilt"], light["tilt"] + 1}
 
 
 def rig_levels(rig, dmx):
     """Each light's level: the max of its slots / 255, or, for a light with an intensity
     slot, that slot / 255 times the max of its other slots / 255 (1 when it has none): a
-    fixture at intensity 0 is dark whatever colour it holds. 0 when its universe was not
-    seen."""
+    fixture at intensity 0 is dark whatever colour it holds. A moving light's pan and tilt
+    are not light. 0 when its universe was not seen."""
     levels = []
     for light in rig:
         slots = dmx.get(light["universe"], bytes(512))
         start = light["address"] - 1
+        aim = position_slots(light)
         slots = list(slots[start:start + light["footprint"]])
         i = light.get("intensity")
         if i is None:
-            levels.append(max(slots, default=0) / 255.0)
+            levels.append(max((v for k, v in enumerate(slots) if k not in aim), default=0)
+                          / 255.0)
         else:
-            others = slots[:i] + slots[i + 1:]
+            others = [v for k, v in enumerate(slots) if k != i and k not in aim]
             levels.append(slots[i] / 255.0 * (max(others) / 255.0 if others else 1.0))
     return levels
 
 
-def rig_radiance(rig, levels):
+def degrees(slots, offset, travel):
+    """The degrees from centre of the 16-bit value at `offset` (coarse, fine) through a
+    travel of `travel` degrees, and one 16-bit step in degrees."""
+    word = slots[offset] * 256 + slots[offset + 1]
+    return (word / 65535.0 - 0.5) * travel, travel / 65535.0
+
+
+def aim_of(light, dmx):
+    """The index of the position a moving light's 16-bit pan and tilt in `dmx` (one
+    universe's 512 slots) point it at, within one step; None when none matches."""
+    slots = dmx[light["address"] - 1:]
+    pan, pan_step = degrees(slots, light["pan"], light["pan_range"])
+    tilt, tilt_step = degrees(slots, light["tilt"], light["tilt_range"])
+    for k, p in enumerate(light["positions"]):
+        if abs(pan - p["pan"]) <= pan_step and abs(tilt - p["tilt"]) <= tilt_step:
+            return k
+    return None
+
+
+def motion_history():
+    """The DMX states a test's listener saw ({universe: [(time, 512 bytes)]}), or None
+    without FAKE_GPHOTO2_MOTION."""
+    path = os.environ.get("FAKE_GPHOTO2_MOTION")
+    if not path:
+        return None
+    try:
+        with open(path, encoding="utf-8") as f:
+            seen = json.load(f)
+    except FileNotFoundError:
+        return {}
+    return {int(u): [(t, bytes.fromhex(h)) for t, h in states] for u, states in seen.items()}
+
+
+def rig_aims(rig, dmx):
+    """Per light, the index of the position it is rendered at (None: black, or a fixed
+    light). A moving light takes FAKE_GPHOTO2_MOVE_S seconds to reach the pan and tilt it
+    is sent: while the listener's history (FAKE_GPHOTO2_MOTION) shows them first sent less
+    than that ago, it is still where the state before them pointed it."""
+    history = motion_history()
+    move_s = float(os.environ.get("FAKE_GPHOTO2_MOVE_S", "0"))
+    now = time.time()
+    aims = []
+    for light in rig:
+        if "positions" not in light:
+            aims.append(None)
+            continue
+        slots = dmx.get(light["universe"], bytes(512))
+        states = (history or {}).get(light["universe"], [])
+        start = light["address"] - 1
+        aim = [start + k for k in sorted(position_slots(light))]
+        current = [slots[k] for k in aim]
+        # The last state whose pan and tilt differ from the wire's: the mover left it
+        # when the next state was first seen.
+        for i in range(len(states) - 1, -1, -1):
+            if [states[i][1][k] for k in aim] != current:
+                if i + 1 < len(states) and now - states[i + 1][0] < move_s:
+                    slots = states[i][1]
+                break
+        aims.append(aim_of(light, slots))
+    return aims
+
+
+def rig_radiance(rig, levels, aims):
     import numpy as np
     total = None
-    for light, level in zip(rig, levels):
-        basis = np.load(light["basis"]).astype(np.float32)
+    for light, level, aim in zip(rig, levels, aims):
+        if "positions" in light:
+            basis = np.load(light["positions"][aim or 0]["basis"]).astype(np.float32)
+            if aim is None:
+                basis = np.zeros_like(basis)  # aimed at none of its positions: out of frame
+        else:
+            basis = np.load(light["basis"]).astype(np.float32)
         total = basis * level if total is None else total + basis * level
     zoom = int(os.environ.get("FAKE_GPHOTO2_ZOOM", "1"))
     if zoom > 1:
@@ -522,6 +613,7 @@ def rig_frame(state):
     rig = load_rig(rig_path)
     dmx = receive_dmx(int(port), {light["universe"] for light in rig})
     levels = rig_levels(rig, dmx)
+    aims = rig_aims(rig, dmx)
     log = os.environ.get("FAKE_GPHOTO2_DMX_LOG")
     if log:
         with open(log, "a", encoding="utf-8") as f:
@@ -529,8 +621,10 @@ def rig_frame(state):
                 "capture": state["captures"],
                 "universes": {str(u): d.hex() for u, d in sorted(dmx.items())},
                 "levels": levels,
+                "aims": aims,
+                "time": time.time(),
             }) + "\n")
-    return rig_radiance(rig, levels), levels
+    return rig_radiance(rig, levels, aims), levels
 
 
 def hangs_when_lit(levels):

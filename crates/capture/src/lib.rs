@@ -72,6 +72,9 @@ pub struct CaptureOptions {
     pub lights: Option<Vec<u32>>,
     /// How long a light is given to reach its level before the first frame (lamps warm up).
     pub settle: Duration,
+    /// How long a moving light is given, dark, to reach a new position before it is lit
+    /// (`[capture] move_settle_s`): a shot taken while it still moves shows it elsewhere.
+    pub move_settle: Duration,
     /// Basis width in pixels (height from the camera's aspect).
     pub width: usize,
     /// Raw or JPEG.
@@ -118,8 +121,13 @@ pub struct Summary {
     pub captured: Vec<u32>,
     /// Channels already written by an earlier run (resumed past).
     pub resumed: Vec<u32>,
-    /// Channels that show no light, with the sentence saying so.
+    /// Channels that show no light, with the sentence saying so (a moving light once per
+    /// position that shows none).
     pub no_light: Vec<(u32, String)>,
+    /// Moving lights' positions written in this run, as (channel, palette).
+    pub positions_captured: Vec<(u32, u32)>,
+    /// Moving lights' positions already written by an earlier run, as (channel, palette).
+    pub positions_resumed: Vec<(u32, u32)>,
     /// Relative change of the ambient light between start and end.
     pub ambient_drift: Option<f64>,
     /// Median relative error of the validation shot against the composite.
@@ -163,6 +171,13 @@ pub struct Record {
     /// Per-emitter images written (`--emitters`), by channel and emitter name.
     #[serde(default)]
     pub emitters: BTreeMap<u32, BTreeMap<String, LightRecord>>,
+    /// Moving lights' position images written, by channel and focus palette: a moving
+    /// light's images are its positions', so it has no entry in `lights`.
+    #[serde(default)]
+    pub positions: BTreeMap<u32, BTreeMap<u32, LightRecord>>,
+    /// Moving lights' positions that showed no light, by channel and focus palette.
+    #[serde(default)]
+    pub no_light_positions: BTreeMap<u32, BTreeMap<u32, String>>,
     /// Relative ambient change between start and end.
     pub ambient_drift: Option<f64>,
     /// Median relative error of the validation shot.
@@ -235,6 +250,9 @@ struct Session<'a> {
     /// Time spent in the camera's calls and waiting for the rig, so far: what capture's
     /// own overhead is measured without.
     waited: Duration,
+    /// The look last put on the rig: where each moving light points now, so [`Session::show`]
+    /// moves one dark before it is lit somewhere else.
+    shown: Look,
 }
 
 /// Captures the scene's basis images (see the crate's documentation). `output` must be
@@ -295,6 +313,8 @@ pub fn capture(
         shots: 0,
         patch: Patch::new(scene),
         waited: Duration::ZERO,
+        // What the caller starts the output with.
+        shown: Look::off(scene.lights.len()),
     };
     if s.shutters.is_empty() {
         return Err(CaptureError::Files(
@@ -335,9 +355,36 @@ impl Session<'_> {
         for l in todo {
             let light = &self.scene.lights[l];
             let ch = light.channel;
+            if light.is_moving() {
+                // Each position with no image yet; a moving light has no emitter images
+                // (scene.toml keeps `emitter_basis` for fixed lights: they would hold
+                // for one position only).
+                let (before, mut resumed) = (summary.positions_captured.len(), 0);
+                for p in 0..light.positions.len() {
+                    let palette = light.positions[p].palette;
+                    let done = self
+                        .record
+                        .positions
+                        .get(&ch)
+                        .is_some_and(|m| m.contains_key(&palette));
+                    if done && light.positions[p].basis.is_file() {
+                        summary.positions_resumed.push((ch, palette));
+                        resumed += 1;
+                    } else {
+                        self.alone(l, Some(p), (&ambient, &again), &mut summary, &mut own)?;
+                    }
+                }
+                if summary.positions_captured.len() > before {
+                    summary.captured.push(ch);
+                } else if resumed == light.positions.len() {
+                    summary.resumed.push(ch);
+                }
+                self.progress.light_done();
+                continue;
+            }
             if self.record.lights.contains_key(&ch) && light.basis.is_file() {
                 summary.resumed.push(ch);
-            } else if !self.white(l, &ambient, &again, &mut summary, &mut own)? {
+            } else if !self.alone(l, None, (&ambient, &again), &mut summary, &mut own)? {
                 self.progress.light_done();
                 continue;
             }
@@ -363,8 +410,14 @@ impl Session<'_> {
         }
         summary.ambient_drift = Some(drift.relative);
         self.record.ambient_drift = summary.ambient_drift;
-        summary.overhead_per_light = (!summary.captured.is_empty())
-            .then(|| own.as_secs_f64() / summary.captured.len() as f64);
+        // Per image: a moving light's positions each count as one.
+        let images = summary.positions_captured.len()
+            + summary
+                .captured
+                .iter()
+                .filter(|&&ch| self.record.lights.contains_key(&ch))
+                .count();
+        summary.overhead_per_light = (images > 0).then(|| own.as_secs_f64() / images as f64);
         summary.overhead_per_emitter = (summary.emitter_images > 0)
             .then(|| own_emitters.as_secs_f64() / summary.emitter_images as f64);
         summary.validation = self.validate(&ambient)?;
@@ -376,68 +429,108 @@ impl Session<'_> {
         Ok(summary)
     }
 
-    /// Light `l` at full white alone, merged, the ambient taken off and written as its
-    /// basis image; false (recorded and reported) when it shows no light.
-    fn white(
+    /// Light `l` at full white alone (a moving light in its position `position`, an index
+    /// into its [`visobjd_scene::Light::positions`]: moved there dark first by
+    /// [`Session::show`]), merged, the ambient (`ambient`, and `again` for the noise test)
+    /// taken off and written as its basis image (the position's); false (recorded and
+    /// reported) when it shows no light.
+    fn alone(
         &mut self,
         l: usize,
-        ambient: &Radiance,
-        again: &Radiance,
+        position: Option<usize>,
+        (ambient, again): (&Radiance, &Radiance),
         summary: &mut Summary,
         own: &mut Duration,
     ) -> Result<bool, CaptureError> {
         let light = &self.scene.lights[l];
         let (ch, name) = (light.channel, light.name.clone());
+        let aim = position.map(|p| &light.positions[p]);
+        let palette = aim.map(|p| p.palette);
+        let basis = aim.map_or(&light.basis, |p| &p.basis).clone();
+        let what = match palette {
+            Some(n) => format!("light {ch} ({name}) in palette {}", self.palette_name(n)),
+            None => format!("light {ch} ({name})"),
+        };
         if self.stop.load(Ordering::SeqCst) {
             return Err(CaptureError::Stopped);
         }
-        self.progress.step(&format!("light {ch} ({name})"));
+        self.progress.step(&what);
         let (started, waited) = (Instant::now(), self.waited);
         let mut look = Look::off(self.scene.lights.len());
-        look.levels[l] = WHITE;
+        look.levels[l] = Level {
+            position: palette,
+            ..WHITE
+        };
         let merged = self.shoot_look(&look, self.patch.unmastered(&look), false)?;
         let mut test = visobjd_hdr::light_test(&merged.radiance, ambient)?;
         let above = above_null(&merged.radiance, ambient, again);
         test.shows_light &= above >= test.min_lit_pixels;
-        tracing::debug!("light {ch}: {test:?}, {above} samples above the ambient's own spread");
+        tracing::debug!("{what}: {test:?}, {above} samples above the ambient's own spread");
         if !test.shows_light {
-            let why = format!(
-                "light {ch} ({name}) shows no light: unpatched, lamp out, or aimed out of frame?"
-            );
+            let why = format!("{what} shows no light: unpatched, lamp out, or aimed out of frame?");
             self.progress.warn(&why);
-            self.record.no_light.insert(ch, why.clone());
+            match palette {
+                Some(n) => {
+                    self.record
+                        .no_light_positions
+                        .entry(ch)
+                        .or_default()
+                        .insert(n, why.clone());
+                }
+                None => {
+                    self.record.no_light.insert(ch, why.clone());
+                }
+            }
             summary.no_light.push((ch, why));
             save_record(self.scene_dir, &self.record)?;
             return Ok(false);
         }
         if merged.clipped_everywhere > 0 {
             self.progress.warn(&format!(
-                "light {ch} ({name}): {} pixels are clipped even at the shortest exposure: close the aperture or lower the ISO",
+                "{what}: {} pixels are clipped even at the shortest exposure: close the aperture or lower the ISO",
                 merged.clipped_everywhere
             ));
         }
-        let basis = visobjd_hdr::subtract_ambient(&merged.radiance, ambient)?;
-        visobjd_hdr::write_exr(&light.basis, &basis)?;
-        self.record.no_light.remove(&ch);
-        self.record.lights.insert(
-            ch,
-            LightRecord {
-                basis: light
-                    .basis
-                    .strip_prefix(self.scene_dir)
-                    .unwrap_or(&light.basis)
-                    .display()
-                    .to_string(),
-                dmx: self.dmx_of(l, &self.patch.unmastered(&look)),
-                exposures: merged.exposures,
-                clipped: merged.clipped_everywhere,
-                time: now(),
-            },
-        );
+        let image = visobjd_hdr::subtract_ambient(&merged.radiance, ambient)?;
+        visobjd_hdr::write_exr(&basis, &image)?;
+        let done = LightRecord {
+            basis: basis
+                .strip_prefix(self.scene_dir)
+                .unwrap_or(&basis)
+                .display()
+                .to_string(),
+            dmx: self.dmx_of(l, &self.patch.unmastered(&look)),
+            exposures: merged.exposures,
+            clipped: merged.clipped_everywhere,
+            time: now(),
+        };
+        match palette {
+            Some(n) => {
+                if let Some(m) = self.record.no_light_positions.get_mut(&ch) {
+                    m.remove(&n);
+                }
+                self.record.positions.entry(ch).or_default().insert(n, done);
+                summary.positions_captured.push((ch, n));
+            }
+            None => {
+                self.record.no_light.remove(&ch);
+                self.record.lights.insert(ch, done);
+                summary.captured.push(ch);
+            }
+        }
+        self.record.no_light_positions.retain(|_, m| !m.is_empty());
         save_record(self.scene_dir, &self.record)?;
-        summary.captured.push(ch);
         *own += started.elapsed().saturating_sub(self.waited - waited);
         Ok(true)
+    }
+
+    /// Focus palette `number` as messages name it: `3 "DS centre"`, or `3`.
+    fn palette_name(&self, number: u32) -> String {
+        self.scene
+            .palettes
+            .iter()
+            .find(|p| p.number == number)
+            .map_or_else(|| number.to_string(), visobjd_scene::Palette::describe)
     }
 
     /// Light `l`'s additive emitters, each alone at full with its dimmer at full and every
@@ -544,12 +637,41 @@ impl Session<'_> {
 
     /// Puts `look` on the rig as the slot levels `frame` (its [`Patch::unmastered`], or a
     /// light's emitter alone: [`Patch::emitter_alone`]) and waits for the lamps and for
-    /// frames that carry it.
+    /// frames that carry it. A moving light lit in `look` at another position than the
+    /// rig shows goes there dark first (`look` with its intensity 0) and is given
+    /// `move_settle` to arrive: a light is never photographed, nor swept across the stage
+    /// lit, on its way.
     fn show(&mut self, look: &Look, frame: SlotLevels) -> Result<(), CaptureError> {
         let started = Instant::now();
-        self.output.set_frame(look.clone(), frame);
+        let level = |look: &Look, l: usize| look.levels.get(l).copied().unwrap_or(Level::OFF);
+        let mut dark = look.clone();
+        let mut moves = false;
+        for (l, light) in self.scene.lights.iter().enumerate() {
+            let (to, from) = (level(look, l), level(&self.shown, l));
+            let palette = |lv: &Level| light.position_of(lv).map(|p| p.palette);
+            if to.intensity > 0.0 && palette(&to) != palette(&from) {
+                moves = true;
+                if let Some(d) = dark.levels.get_mut(l) {
+                    d.intensity = 0.0;
+                }
+            }
+        }
+        if moves {
+            let frame = self.patch.unmastered(&dark);
+            self.send(dark, frame, self.opts.move_settle)?;
+        }
+        self.send(look.clone(), frame, self.opts.settle)?;
+        self.shown = look.clone();
+        self.waited += started.elapsed();
+        Ok(())
+    }
+
+    /// Sends `frame` (standing for `look`), waits `settle`, then for two DMX frames that
+    /// carry it.
+    fn send(&self, look: Look, frame: SlotLevels, settle: Duration) -> Result<(), CaptureError> {
+        self.output.set_frame(look, frame);
         let ticks = self.output.stats().ticks;
-        std::thread::sleep(self.opts.settle);
+        std::thread::sleep(settle);
         let deadline = Instant::now() + Duration::from_secs(5);
         while self.output.stats().ticks < ticks + 2 {
             if Instant::now() > deadline {
@@ -559,7 +681,6 @@ impl Session<'_> {
             }
             std::thread::sleep(Duration::from_millis(5));
         }
-        self.waited += started.elapsed();
         Ok(())
     }
 
@@ -730,14 +851,35 @@ impl Session<'_> {
         (light.universe, light.address, bytes[u][start..end].to_vec())
     }
 
+    /// The focus palettes of moving light `l` captured (recorded, their image on disk),
+    /// in its order; empty for a fixed light.
+    fn captured_palettes(&self, l: usize) -> Vec<u32> {
+        let light = &self.scene.lights[l];
+        let recorded = self.record.positions.get(&light.channel);
+        light
+            .positions
+            .iter()
+            .filter(|p| recorded.is_some_and(|m| m.contains_key(&p.palette)) && p.basis.is_file())
+            .map(|p| p.palette)
+            .collect()
+    }
+
     /// A random look of a few captured lights, shot and compared with the composite of
-    /// their basis images: the median relative error over the pixels the look lights.
+    /// their basis images: the median relative error over the pixels the look lights. A
+    /// moving light in it takes a random captured position other than its first when it
+    /// has one (its first is what a look naming none shows), and the look holds one when
+    /// any is captured, so the positions' images and the moves to them are checked too.
     fn validate(&mut self, ambient: &Radiance) -> Result<Option<f64>, CaptureError> {
+        let palettes: Vec<Vec<u32>> = (0..self.scene.lights.len())
+            .map(|l| self.captured_palettes(l))
+            .collect();
         let captured: Vec<usize> = (0..self.scene.lights.len())
             .filter(|&l| {
-                self.record
-                    .lights
-                    .contains_key(&self.scene.lights[l].channel)
+                !palettes[l].is_empty()
+                    || self
+                        .record
+                        .lights
+                        .contains_key(&self.scene.lights[l].channel)
             })
             .collect();
         if captured.is_empty() {
@@ -748,21 +890,44 @@ impl Session<'_> {
         let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(self.opts.seed ^ 0x5eed);
         let mut look = Look::off(self.scene.lights.len());
         let mut composite: Option<Radiance> = None;
-        for _ in 0..captured.len().min(4) {
-            let l = captured[rng.random_range(0..captured.len())];
+        let movers: Vec<usize> = captured
+            .iter()
+            .copied()
+            .filter(|&l| !palettes[l].is_empty())
+            .collect();
+        let mut chosen: Vec<usize> = (0..captured.len().min(4))
+            .map(|_| captured[rng.random_range(0..captured.len())])
+            .collect();
+        if !movers.is_empty() && !chosen.iter().any(|l| movers.contains(l)) {
+            chosen.push(movers[rng.random_range(0..movers.len())]);
+        }
+        for l in chosen {
             let level = rng.random_range(0.3f32..1.0);
+            let first = self.scene.lights[l].positions.first().map(|p| p.palette);
+            let others: Vec<u32> = palettes[l]
+                .iter()
+                .copied()
+                .filter(|&n| Some(n) != first)
+                .collect();
+            let choices = if others.is_empty() {
+                &palettes[l]
+            } else {
+                &others
+            };
             look.levels[l] = Level {
                 intensity: level,
                 color: [1.0; 3],
-                position: None,
+                position: (!choices.is_empty())
+                    .then(|| choices[rng.random_range(0..choices.len())]),
             };
         }
         for (l, lv) in look.levels.iter().enumerate() {
             if lv.intensity == 0.0 {
                 continue;
             }
-            let img = visobjd_compositor::basis::read_exr(&self.scene.lights[l].basis)
-                .map_err(CaptureError::Files)?;
+            let light = &self.scene.lights[l];
+            let basis = light.position_of(lv).map_or(&light.basis, |p| &p.basis);
+            let img = visobjd_compositor::basis::read_exr(basis).map_err(CaptureError::Files)?;
             let c = composite.get_or_insert_with(|| Radiance {
                 width: img.width,
                 height: img.height,

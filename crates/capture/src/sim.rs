@@ -8,6 +8,12 @@
 //! colour matrix, read back through `rawler` like a camera's). Each file
 //! carries its exposure in EXIF, read back like a real camera's.
 //!
+//! A moving light is photographed at the position its pan and tilt on the wire point it
+//! at: the scene's image of the position whose pan and tilt bytes (as the patch sends
+//! them) they are, or nothing (aimed out of frame) when they are none of its positions.
+//! The sim's movers arrive at once; the fake gphoto2 of the tests is the one that takes
+//! time (docs/capture.md).
+//!
 //! The fixtures may be other than their profiles say: `capture/sim/emitters.json` gives,
 //! per channel, the emitters as they really are (`{"3": [{"name": "red", "xy": [0.6, 0.35],
 //! "flux": 0.3}]}`, keys as in `[[profile.emitter]]`; emitters not listed stay as the
@@ -63,8 +69,12 @@ pub struct SimCamera {
     patch: Patch,
     /// The latest DMX received, per patched universe.
     dmx: Vec<[u8; SLOTS]>,
-    /// Per light: its basis image at sensor resolution, linear RGB.
-    truth: Vec<Vec<[f32; 3]>>,
+    /// Per light: its basis image at sensor resolution, linear RGB; a moving light's, one
+    /// per position in its scene order.
+    truth: Vec<Vec<Vec<[f32; 3]>>>,
+    /// Per light: for a moving light, where its pan and tilt bytes are (universe index,
+    /// slot) and, per position, the bytes the patch sends for it; empty for a fixed light.
+    aims: Vec<Aims>,
     /// Per light: its emitters as they really are (`capture/sim/emitters.json`), or `None`
     /// where the profile is right.
     real: Vec<Option<ColourModel>>,
@@ -94,42 +104,63 @@ impl SimCamera {
         std::fs::create_dir_all(&stage)
             .map_err(|e| format!("{}: cannot make it: {e}", stage.display()))?;
         for (i, light) in scene.lights.iter().enumerate() {
-            let copy = stage.join(format!("{i:04}.exr"));
-            if !copy.is_file() {
-                std::fs::copy(&light.basis, &copy).map_err(|e| {
+            let images: Vec<(String, &Path)> = if light.is_moving() {
+                light
+                    .positions
+                    .iter()
+                    .map(|p| (format!("{i:04}-{}.exr", p.palette), p.basis.as_path()))
+                    .collect()
+            } else {
+                vec![(format!("{i:04}.exr"), light.basis.as_path())]
+            };
+            let mut imgs = Vec::with_capacity(images.len());
+            for (name, basis) in images {
+                let copy = stage.join(name);
+                if !copy.is_file() {
+                    std::fs::copy(basis, &copy).map_err(|e| {
+                        format!(
+                            "the sim camera photographs the scene's own basis images (render them with `visobjd synth`): {}: {e}",
+                            basis.display()
+                        )
+                    })?;
+                }
+                let img = visobjd_compositor::basis::read_exr(&copy).map_err(|e| {
                     format!(
-                        "the sim camera photographs the scene's own basis images (render them with `visobjd synth`): {}: {e}",
-                        light.basis.display()
+                        "the sim camera photographs the scene's own basis images (render them with `visobjd synth`): {e}"
                     )
                 })?;
+                if *size.get_or_insert((img.width, img.height)) != (img.width, img.height) {
+                    return Err(format!(
+                        "{}: the basis images differ in size",
+                        basis.display()
+                    ));
+                }
+                imgs.push(img);
             }
-            let img = visobjd_compositor::basis::read_exr(&copy).map_err(|e| {
-                format!(
-                    "the sim camera photographs the scene's own basis images (render them with `visobjd synth`): {e}"
-                )
-            })?;
-            if *size.get_or_insert((img.width, img.height)) != (img.width, img.height) {
-                return Err(format!(
-                    "{}: the basis images differ in size",
-                    light.basis.display()
-                ));
-            }
-            truth.push(img);
+            truth.push(imgs);
         }
         let (w, h) = size.ok_or("the scene has no lights")?;
         let k = SENSOR_WIDTH.div_ceil(w).max(1);
         let (width, height) = (w * k, h * k);
         let truth = truth
             .into_iter()
-            .map(|img| {
-                (0..width * height)
-                    .map(|i| img.pixels[(i / width / k) * w + (i % width) / k])
+            .map(|imgs| {
+                imgs.into_iter()
+                    .map(|img| {
+                        (0..width * height)
+                            .map(|i| img.pixels[(i / width / k) * w + (i % width) / k])
+                            .collect()
+                    })
                     .collect()
             })
             .collect();
         let patch = Patch::new(scene);
+        let aims = (0..scene.lights.len())
+            .map(|l| Aims::of(scene, &patch, l))
+            .collect();
         let real = real_emitters(scene, &stage.join("emitters.json"))?;
         Ok(SimCamera {
+            aims,
             real,
             socket,
             dmx: vec![[0; SLOTS]; patch.universes().len()],
@@ -209,10 +240,13 @@ impl SimCamera {
         let m = self.patch.multipliers_as(&self.dmx, &self.real);
         let relative = (seconds * ISO / (F_NUMBER * F_NUMBER)) as f32;
         let mut out = vec![[0.0f32; 3]; self.width * self.height];
-        for (light, basis) in m.iter().zip(&self.truth) {
+        for ((light, images), aims) in m.iter().zip(&self.truth).zip(&self.aims) {
             if *light == [0.0; 3] {
                 continue;
             }
+            let Some(basis) = images.get(aims.position(&self.dmx)) else {
+                continue; // aimed at none of its positions: out of frame
+            };
             for (o, b) in out.iter_mut().zip(basis) {
                 for c in 0..3 {
                     o[c] += light[c] * b[c] * relative;
@@ -231,6 +265,60 @@ impl SimCamera {
             }
         }
         out
+    }
+}
+
+/// Where a moving light's pan and tilt bytes are and what the patch sends in them for each
+/// of its positions: how the sim tells which of its images a light shows.
+struct Aims {
+    /// (universe index, slot) of each pan and tilt byte.
+    slots: Vec<(usize, usize)>,
+    /// Per position, in the light's order, the bytes of `slots`.
+    bytes: Vec<Vec<u8>>,
+}
+
+impl Aims {
+    /// Light `l`'s (no slots for a fixed light).
+    fn of(scene: &Scene, patch: &Patch, l: usize) -> Aims {
+        let light = &scene.lights[l];
+        let universe = patch
+            .universes()
+            .binary_search(&light.universe)
+            .unwrap_or_default();
+        let mut at = usize::from(light.address.max(1)) - 1;
+        let mut slots = Vec::new();
+        for slot in &scene.profile(l).slots {
+            if slot.is_position() {
+                slots.extend((at..at + slot.width()).map(|s| (universe, s)));
+            }
+            at += slot.width();
+        }
+        slots.retain(|&(_, s)| s < SLOTS);
+        let bytes = light
+            .positions
+            .iter()
+            .map(|p| {
+                let mut look = visobjd_scene::look::Look::off(scene.lights.len());
+                look.levels[l].position = Some(p.palette);
+                let sent = patch.quantise(&patch.unmastered(&look));
+                slots.iter().map(|&(u, s)| sent[u][s]).collect()
+            })
+            .collect();
+        Aims { slots, bytes }
+    }
+
+    /// The index of the image the light shows with `dmx` on the wire: 0 for a fixed light,
+    /// the position its pan and tilt bytes are for a moving one, and past the end (nothing)
+    /// when they are none of its positions.
+    fn position(&self, dmx: &[[u8; SLOTS]]) -> usize {
+        if self.bytes.is_empty() {
+            return 0;
+        }
+        let got: Vec<u8> = self.slots.iter().map(|&(u, s)| dmx[u][s]).collect();
+        self.bytes
+            .iter()
+            .position(|b| *b == got)
+            .unwrap_or(self.bytes.len())
     }
 }
 
