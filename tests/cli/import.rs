@@ -940,19 +940,23 @@ fn an_eos_consoles_groups_become_the_scenes_groups() {
     };
     let dir = temp_dir("import-eos-groups");
     let out = dir.join("scene");
-    stdout(&run(&[
-        "import",
-        &console.url("eos"),
-        "--out",
-        s(&out),
-        "--fixtures",
-        s(&fixtures()),
-    ]));
+    stdout(&import_eos(&console, &out, &[]));
     let scene = scene_toml(&out);
     // Channel 1 is in both: the first group holding it wins.
     assert_eq!(light(&scene, 1)["group"].as_str(), Some("Front"));
     assert_eq!(light(&scene, 22)["group"].as_str(), Some("Cyc"));
     assert!(light(&scene, 11).get("group").is_none());
+}
+
+/// `visobjd import` from the fake console into `out` with the test fixtures, and `extra`
+/// arguments.
+fn import_eos(console: &FakeEos, out: &Path, extra: &[&str]) -> Output {
+    let url = console.url("eos");
+    let mut args = vec!["import", &url, "--out", s(out), "--fixtures"];
+    let fixtures = fixtures();
+    args.push(s(&fixtures));
+    args.extend_from_slice(extra);
+    run(&args)
 }
 
 /// The focus palettes the palette tests' console holds (`--fp`): two whole ones on the
@@ -973,16 +977,7 @@ fn an_eos_consoles_focus_palettes_are_listed_and_name_the_scenes_positions() {
     };
     let dir = temp_dir("import-eos-palettes");
     let out = dir.join("scene");
-    let import = |console: &FakeEos| {
-        stdout(&run(&[
-            "import",
-            &console.url("eos"),
-            "--out",
-            s(&out),
-            "--fixtures",
-            s(&fixtures()),
-        ]))
-    };
+    let import = |console: &FakeEos| stdout(&import_eos(&console, &out, &[]));
     let printed = import(&first);
     for want in [
         "focus palette 3 \"DS centre\": channels 41-42",
@@ -1040,16 +1035,7 @@ fn a_console_that_does_not_answer_about_palettes_still_gives_its_patch() {
     };
     let dir = temp_dir("import-eos-palettes-silent");
     let out = dir.join("scene");
-    let printed = stdout(&run(&[
-        "import",
-        &console.url("eos"),
-        "--out",
-        s(&out),
-        "--fixtures",
-        s(&fixtures()),
-        "--timeout",
-        "0.5",
-    ]));
+    let printed = stdout(&import_eos(&console, &out, &["--timeout", "0.5"]));
     assert!(
         printed.contains(
             "focus palettes not read: Eos did not answer within 0.5 s while reading the focus \
@@ -1067,16 +1053,7 @@ fn a_console_that_stops_answering_is_an_error_that_writes_nothing() {
     };
     let dir = temp_dir("import-eos-hang");
     let out = dir.join("scene");
-    let r = run(&[
-        "import",
-        &console.url("eos"),
-        "--out",
-        s(&out),
-        "--fixtures",
-        s(&fixtures()),
-        "--timeout",
-        "1",
-    ]);
+    let r = import_eos(&console, &out, &["--timeout", "1"]);
     fails_with(
         &r,
         &[
