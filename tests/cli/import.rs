@@ -977,7 +977,7 @@ fn an_eos_consoles_focus_palettes_are_listed_and_name_the_scenes_positions() {
     };
     let dir = temp_dir("import-eos-palettes");
     let out = dir.join("scene");
-    let import = |console: &FakeEos| stdout(&import_eos(&console, &out, &[]));
+    let import = |console: &FakeEos| stdout(&import_eos(console, &out, &[]));
     let printed = import(&first);
     for want in [
         "focus palette 3 \"DS centre\": channels 41-42",
