@@ -9,6 +9,7 @@ use rayon::prelude::*;
 use crate::render::STRIP;
 
 use visobjd_scene::emitter::ColourModel;
+use visobjd_scene::look::Level;
 use visobjd_scene::{Scene, SceneError};
 
 /// How basis samples are stored.
@@ -178,12 +179,11 @@ impl BasisImages {
         }
     }
 
-    /// The image light `light` lights in position `palette` (`None`, or a palette it does
-    /// not have: its first position, its white image): what the compositor weighs.
-    pub fn image_of(&self, light: usize, palette: Option<u32>) -> usize {
-        let held = &self.positions[light];
-        palette
-            .and_then(|n| held.iter().find(|(p, _)| *p == n))
+    /// The image light `light` lights at `level` (a fixed light: its white image; a mover:
+    /// its position's, [`Level::position_in`]): what the compositor weighs.
+    pub fn image_of(&self, light: usize, level: &Level) -> usize {
+        level
+            .position_in(&self.positions[light], |&(p, _)| p)
             .map_or(light, |&(_, image)| image)
     }
 

@@ -80,9 +80,7 @@ pub fn weights(basis: &BasisImages, looks: &[&Look], gain: f32) -> Vec<Vec<[f32;
                 .enumerate()
             {
                 match emitters {
-                    None => {
-                        w[basis.image_of(l, lv.position)] = colour.multiplier(lv).map(|m| m * gain)
-                    }
+                    None => w[basis.image_of(l, lv)] = colour.multiplier(lv).map(|m| m * gain),
                     Some(first) if lv.intensity > 0.0 => {
                         let k = lv.intensity * gain;
                         for (wi, level) in
@@ -1022,7 +1020,7 @@ pub fn render_reference(basis: &BasisImages, look: &Look, gain: f32) -> Vec<f32>
     };
     for (l, (lv, colour)) in look.levels.iter().zip(&basis.colours).enumerate() {
         match basis.emitter_images[l] {
-            None => add(basis.image_of(l, lv.position), colour.multiplier(lv)),
+            None => add(basis.image_of(l, lv), colour.multiplier(lv)),
             Some(first) => {
                 for (k, level) in colour.solve(lv.color).levels().iter().enumerate() {
                     add(first + k, [*level as f32 * lv.intensity; 3]);

@@ -235,11 +235,8 @@ impl Patch {
             let intensity = unit(level.intensity);
             let color = level.color.map(unit);
             let fold = if light.has_intensity { 1.0 } else { intensity };
-            let [pan, tilt] = light
-                .positions
-                .iter()
-                .find(|(n, _)| Some(*n) == level.position)
-                .or(light.positions.first())
+            let [pan, tilt] = level
+                .position_in(&light.positions, |&(n, _)| n)
                 .map_or([0.5; 2], |&(_, aim)| aim);
             let solution = light.colour.solve(color).at(f64::from(fold));
             let emitters = solution.levels();

@@ -73,11 +73,7 @@ impl Features {
                 push(f64::from(lab[2]) / 100.0, 2);
             }
             let aims = &self.aims[l];
-            if let Some(&(_, pan, tilt)) = lv
-                .position
-                .and_then(|n| aims.iter().find(|a| a.0 == n))
-                .or(aims.first())
-            {
+            if let Some(&(_, pan, tilt)) = lv.position_in(aims, |a| a.0) {
                 push(pan, 3);
                 push(tilt, 3);
             }

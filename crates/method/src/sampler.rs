@@ -342,7 +342,11 @@ impl IntensityStep {
             + unit
                 .movers
                 .iter()
-                .map(|(l, by)| mover_sensitivity(by, look.levels[*l].position))
+                .map(|(l, by)| {
+                    look.levels[*l]
+                        .position_in(by, |&(p, _)| p)
+                        .map_or(0.0, |&(_, s)| s)
+                })
                 .sum::<f32>();
         if s > 0.0 && self.mean_inv > 0.0 {
             (1.0 / s) / self.mean_inv
@@ -350,14 +354,6 @@ impl IntensityStep {
             1.0
         }
     }
-}
-
-/// A mover's sensitivity at `palette` (`None` or one it lacks: its first position's).
-fn mover_sensitivity(by_palette: &[(u32, f32)], palette: Option<u32>) -> f32 {
-    palette
-        .and_then(|n| by_palette.iter().find(|(p, _)| *p == n))
-        .or(by_palette.first())
-        .map_or(0.0, |&(_, s)| s)
 }
 
 /// The moving lights of each of `t`'s sampling units that the sampler may aim, and the

@@ -244,11 +244,7 @@ impl Light {
     /// The position `level` puts this light in: its palette if the light has it, else
     /// its first (`None` for a fixed light).
     pub fn position_of(&self, level: &look::Level) -> Option<&Position> {
-        level
-            .position
-            .and_then(|n| self.position_index(n))
-            .or((!self.positions.is_empty()).then_some(0))
-            .map(|i| &self.positions[i])
+        level.position_in(&self.positions, |p| p.palette)
     }
 
     /// Its palette numbers, in its order, for "it has 1, 3, 5" messages.

@@ -30,6 +30,16 @@ impl Level {
         position: None,
     };
 
+    /// Of a light's positions `held` (in scene order, `palette` naming each one's focus
+    /// palette), the one this level puts it in: its palette if held, else the first;
+    /// `None` when none is held (a fixed light). The one reading of a look's position, for
+    /// the DMX output, the preview, the sampler and the preference model alike.
+    pub fn position_in<'a, T>(&self, held: &'a [T], palette: impl Fn(&T) -> u32) -> Option<&'a T> {
+        self.position
+            .and_then(|n| held.iter().find(|h| palette(h) == n))
+            .or(held.first())
+    }
+
     /// A level of a fixed light (or a mover in its first position).
     pub const fn new(intensity: f32, color: [f32; 3]) -> Level {
         Level {
