@@ -127,13 +127,11 @@ impl Default for Spread {
 #[derive(Debug, Clone)]
 struct Unit {
     lights: Vec<usize>,
-    /// Brightness normalisation factor (4.2.5), for a unit without moving lights.
-    factor: f32,
     /// Belongs to a designated key group.
     designated: bool,
-    /// Its moving lights' sensitivity per focus palette: their factor follows the
-    /// position drawn ([`IntensityStep::factor`]).
-    movers: Vec<(usize, Vec<(u32, f32)>)>,
+    /// Its moving lights and how the region sees each of their positions: their share of
+    /// the unit's sensitivity follows the position drawn ([`IntensityStep::factor`]).
+    movers: Vec<(usize, Vec<Reach>)>,
     /// The sensitivity of its fixed lights.
     fixed: f32,
 }
@@ -332,20 +330,18 @@ fn dark_color_targets(
 }
 
 impl IntensityStep {
-    /// `unit`'s brightness normalisation factor in `look`: fixed at plan time, or for a
-    /// unit with moving lights from the sensitivity of the positions `look` gives them.
+    /// `unit`'s brightness normalisation factor (4.2.5) in `look`: 1/s over the step's
+    /// mean of 1/s, s its fixed lights' sensitivity and its movers' in the positions
+    /// `look` gives them; 1 for a unit that does not light the region.
     fn factor(&self, unit: &Unit, look: &Look) -> f32 {
-        if unit.movers.is_empty() {
-            return unit.factor;
-        }
         let s = unit.fixed
             + unit
                 .movers
                 .iter()
-                .map(|(l, by)| {
+                .map(|(l, reach)| {
                     look.levels[*l]
-                        .position_in(by, |&(p, _)| p)
-                        .map_or(0.0, |&(_, s)| s)
+                        .position_in(reach, |r| r.palette)
+                        .map_or(0.0, |r| r.sensitivity)
                 })
                 .sum::<f32>();
         if s > 0.0 && self.mean_inv > 0.0 {
@@ -461,16 +457,10 @@ fn intensity_step(
                 / members.len() as f32;
         } else {
             let designated = constraints.keys[group_of[free[0]]];
-            let movers: Vec<(usize, Vec<(u32, f32)>)> = free
+            let movers: Vec<(usize, Vec<Reach>)> = free
                 .iter()
                 .filter(|&&l| !t.positions[l].is_empty())
-                .map(|&l| {
-                    let by = t.positions[l]
-                        .iter()
-                        .map(|r| (r.palette, r.sensitivity))
-                        .collect();
-                    (l, by)
-                })
+                .map(|&l| (l, t.positions[l].clone()))
                 .collect();
             let fixed = free
                 .iter()
@@ -479,7 +469,6 @@ fn intensity_step(
                 .sum();
             units.push(Unit {
                 lights: free,
-                factor: 1.0,
                 designated,
                 movers,
                 fixed,
@@ -495,33 +484,25 @@ fn intensity_step(
             let movers: f32 = u
                 .movers
                 .iter()
-                .map(|(l, by)| {
-                    let aimed: Vec<f32> = t.positions[*l]
-                        .iter()
-                        .filter(|r| r.selected)
-                        .map(|r| r.sensitivity)
-                        .collect();
-                    let pool: Vec<f32> = if aimed.is_empty() {
-                        by.iter().map(|&(_, s)| s).collect()
+                .map(|(_, reach)| {
+                    let aimed = || reach.iter().filter(|r| r.selected);
+                    let (sum, n) = if aimed().next().is_some() {
+                        (aimed().map(|r| r.sensitivity).sum::<f32>(), aimed().count())
                     } else {
-                        aimed
+                        (reach.iter().map(|r| r.sensitivity).sum(), reach.len())
                     };
-                    pool.iter().sum::<f32>() / pool.len().max(1) as f32
+                    sum / n.max(1) as f32
                 })
                 .sum();
             u.fixed + movers
         })
         .collect();
     let inv: Vec<f32> = s.iter().filter(|&&v| v > 0.0).map(|v| 1.0 / v).collect();
-    let mut mean_inv = 0.0;
-    if !inv.is_empty() {
-        mean_inv = inv.iter().sum::<f32>() / inv.len() as f32;
-        for (u, &sv) in units.iter_mut().zip(&s) {
-            if sv > 0.0 {
-                u.factor = (1.0 / sv) / mean_inv;
-            }
-        }
-    }
+    let mean_inv = if inv.is_empty() {
+        0.0
+    } else {
+        inv.iter().sum::<f32>() / inv.len() as f32
+    };
     IntensityStep {
         mean_inv,
         designated_keys: constraints.keys.iter().any(|&k| k),

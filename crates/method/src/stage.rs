@@ -131,12 +131,13 @@ impl Stage {
     /// sensitivities there.
     pub fn target(&self, objective: &Objective) -> Target {
         let stats = objective.analysis.stats;
+        let (selected, sensitivity, positions) = self.footprints.reach(objective.region);
         Target {
             aspects: objective.aspects,
             area: objective.region.area(),
-            selected: self.footprints.select(objective.region),
-            sensitivity: self.footprints.sensitivity(objective.region),
-            positions: self.footprints.positions(objective.region),
+            selected,
+            sensitivity,
+            positions,
             mean: stats.mean_l / 100.0,
             key: stats.key_l / 100.0,
             bright: stats.bright,

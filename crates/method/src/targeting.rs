@@ -120,13 +120,15 @@ impl Footprints {
             .collect()
     }
 
-    /// Per light, per position (the scene's order; empty for a fixed light): its focus
-    /// palette, whether `region` selects the light in that position, and the light's
-    /// sensitivity there ([`Footprints::sensitivity`]).
-    pub fn positions(&self, region: Region) -> Vec<Vec<Reach>> {
+    /// What `region` reaches, each image measured once: per light whether it is selected
+    /// and its sensitivity (as [`Footprints::select`] and [`Footprints::sensitivity`]),
+    /// and per light, per position (the scene's order; empty for a fixed light), its focus
+    /// palette, whether the region selects the light there and its sensitivity there.
+    pub fn reach(&self, region: Region) -> (Vec<bool>, Vec<f32>, Vec<Vec<Reach>>) {
         let selected = self.select_images(region);
         let sensitivity = self.sensitivity_images(region);
-        self.positions
+        let positions = self
+            .positions
             .iter()
             .map(|held| {
                 held.iter()
@@ -137,7 +139,12 @@ impl Footprints {
                     })
                     .collect()
             })
-            .collect()
+            .collect();
+        (
+            self.per_light(&selected, |v| v.contains(&true)),
+            self.per_light(&sensitivity, |v| v[0]),
+            positions,
+        )
     }
 
     fn light(&self, l: usize) -> &[f32] {
