@@ -325,19 +325,12 @@ fn name_positions(file: &mut SceneFile, palettes: &[EosPalette]) -> Vec<u32> {
         .filter(|p| !p.label.is_empty())
         .filter_map(|p| Some((p.whole()?, p.label.as_str())))
         .collect();
-    let mut named = Vec::new();
-    for l in &mut file.light {
-        let mut any = false;
-        for p in &mut l.positions {
-            if let Some(label) = labels.get(&p.palette) {
-                p.name = Some((*label).to_string());
-                any = true;
-            }
-        }
-        if any {
-            named.push(l.channel);
-        }
-    }
+    let mut named: Vec<u32> = labels
+        .iter()
+        .flat_map(|(&n, label)| file.name_palette(n, label))
+        .collect();
+    named.sort_unstable();
+    named.dedup();
     named
 }
 

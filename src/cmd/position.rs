@@ -148,14 +148,7 @@ fn learn(
         }
     }
     if let Some(name) = name {
-        for p in file
-            .light
-            .iter_mut()
-            .flat_map(|l| l.positions.iter_mut())
-            .filter(|p| p.palette == palette)
-        {
-            p.name = Some(name.to_string());
-        }
+        file.name_palette(palette, name);
     }
     let written = file.to_toml().map_err(fail)?;
     Scene::parse(dir, &written).map_err(|e| fail(e.to_string()))?;

@@ -193,6 +193,23 @@ impl SceneFile {
         })
     }
 
+    /// Names focus palette `palette` `name` on every light that has it (a palette has one
+    /// name across the lights), keeping pan, tilt and basis; returns the channels renamed.
+    pub fn name_palette(&mut self, palette: u32, name: &str) -> Vec<u32> {
+        let mut named = Vec::new();
+        for l in &mut self.light {
+            let mut any = false;
+            for p in l.positions.iter_mut().filter(|p| p.palette == palette) {
+                p.name = Some(name.to_string());
+                any = true;
+            }
+            if any {
+                named.push(l.channel);
+            }
+        }
+        named
+    }
+
     /// The TOML text of this file.
     pub fn to_toml(&self) -> Result<String, String> {
         toml::to_string(self).map_err(|e| e.to_string())
