@@ -12,7 +12,6 @@ use std::net::UdpSocket;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::Instant;
 
 use crate::capture_gphoto2::{Fake, RigLight, RigMover, RigPosition, text};
 use crate::common::capture::{config, image_errors, pool, stage_of, track};
@@ -198,12 +197,11 @@ fn setup(name: &str, move_settle_s: f64) -> Option<Setup> {
 }
 
 /// What one run did: its output, the universe 1 states the tracker saw, the fake's log
-/// entries of its frames, and how long it took.
+/// entries of its frames.
 struct Run {
     out: std::process::Output,
     wire: Vec<(f64, Vec<u8>)>,
     frames: Vec<serde_json::Value>,
-    seconds: f64,
 }
 
 impl Setup {
@@ -212,18 +210,11 @@ impl Setup {
         let done = Arc::new(AtomicBool::new(false));
         let socket = self.tracker.try_clone().expect("clone the tracker");
         let tracker = track(socket, Arc::clone(&done), self.dir.join("motion.json"));
-        let started = Instant::now();
         let out = self.fake.capture(&self.config, args, &[]);
-        let seconds = started.elapsed().as_secs_f64();
         done.store(true, Ordering::SeqCst);
         let wire = tracker.join().expect("tracker");
         let frames = self.fake.log().split_off(before);
-        Run {
-            out,
-            wire,
-            frames,
-            seconds,
-        }
+        Run { out, wire, frames }
     }
 }
 
@@ -323,7 +314,7 @@ fn movers_are_captured_at_every_palette_moved_dark_validated_and_resumed() {
         "{}",
         text(&first.out)
     );
-    eprintln!("first run: {:.1} s\n{stdout}", first.seconds);
+    eprintln!("first run:\n{stdout}");
     assert_accurate(&s.dir, "movers");
 
     // Each mover alone at full was rendered at each of its positions (at least a metering
@@ -381,7 +372,6 @@ fn movers_are_captured_at_every_palette_moved_dark_validated_and_resumed() {
         "{}",
         text(&second.out)
     );
-    eprintln!("second run: {:.1} s", second.seconds);
     for k in 0..4 {
         assert!(
             alone_at_full(&second, k).is_empty(),
@@ -400,7 +390,6 @@ fn movers_are_captured_at_every_palette_moved_dark_validated_and_resumed() {
         "{}",
         text(&third.out)
     );
-    eprintln!("third run: {:.1} s", third.seconds);
     for k in [0, 1, 3] {
         assert!(
             alone_at_full(&third, k).is_empty(),

@@ -84,16 +84,12 @@ fn ratings_by_an_untold_rule_steer_the_next_gallery() {
                 groups.clone(),
             )
         };
-        let started = std::time::Instant::now();
         let control = generate(None, seed + 100);
-        let control_ms = started.elapsed().as_secs_f64() * 1e3;
-        let started = std::time::Instant::now();
         let towards = generate(Some(&steer(Mode::Towards)), seed + 100);
-        let towards_ms = started.elapsed().as_secs_f64() * 1e3;
         let away = generate(Some(&steer(Mode::Away)), seed + 100);
         let (c, t, a) = (share(&control), share(&towards), share(&away));
         println!(
-            "seed {seed}: control {c:.2} ({control_ms:.1} ms), towards {t:.2} ({} turned down, {towards_ms:.1} ms), away {a:.2}; entries {} {} {}",
+            "seed {seed}: control {c:.2}, towards {t:.2} ({} turned down), away {a:.2}; entries {} {} {}",
             towards.turned_down,
             control.entries.len(),
             towards.entries.len(),
